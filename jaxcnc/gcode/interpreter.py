@@ -1,0 +1,375 @@
+"""RS274NGC / ISO-7bit interpreter: G-code text into a :class:`~jaxcnc.program.Program`.
+
+The interpreter keeps the modal state (motion mode, plane, units, distance mode, feed, laser,
+path-control mode) and executes each block's words in the RS274NGC order of execution. It
+turns every supported word into its proper meaning and refuses everything else with a
+:class:`~jaxcnc.errors.SourceError` naming ``file:line:column`` and the word — nothing is
+silently ignored.
+
+Supported here: G0 G1 G2 G3 (XY-plane arcs in IJ or R form, full circles), G4, G17, G20 G21,
+G28, G40, G61 G61.1 G64 (P, Q), G90 G91, G94, F, S, T, M0 M1 M2 M30, M3 M4 M5, M6, N,
+comments, ``%`` delimiters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from jaxcnc.errors import SourceError
+from jaxcnc.gcode.lexer import Word, tokenize
+from jaxcnc.program import Event, Kind, LaserMode, Program, program_from_columns
+
+MM_PER_INCH = 25.4
+#: Largest allowed difference between the start and end radius of an IJ arc (mm), as in
+#: LinuxCNC's interpreter; within it the centre is moved onto the chord's bisector so the arc
+#: passes exactly through both end points.
+ARC_RADIUS_TOL_MM = 0.002
+
+# G codes in tenths (G61.1 -> 611) -> modal group, as in the RS274NGC standard.
+_G_GROUP = {0: 1, 10: 1, 20: 1, 30: 1, 40: 0, 280: 0, 170: 2, 900: 3, 910: 3, 940: 5,
+            200: 6, 210: 6, 400: 7, 610: 13, 611: 13, 640: 13}
+_M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7}
+_NOT_YET = {180: "G18 (XZ plane)", 190: "G19 (YZ plane)", 50: "G5 cubic splines", 51: "G5.1 splines",
+            52: "G5.2 NURBS", 62: "G6.2 NURBS", 530: "G53", 920: "G92", 540: "work offset G54",
+            901: "G90.1", 911: "G91.1", 410: "cutter compensation G41", 420: "cutter compensation G42"}
+_AXES = ("X", "Y", "Z")
+_ALLOWED = set("GMFSTNPQXYZIJKR")
+
+
+@dataclass
+class _State:
+    pos: np.ndarray  # current position, mm
+    scale: float = 1.0  # mm per program unit
+    absolute: bool = True
+    motion: int | None = None  # tenths: 0, 10, 20, 30
+    feed_raw: float | None = None  # F as written, program units per minute
+    power: float = 0.0
+    laser: int = LaserMode.OFF
+    tool: int = 0
+    exact_stop: bool = False  # G61.1
+    blend_tol: float = math.inf  # G64 without P (LinuxCNC's start-up mode)
+    pending_stop: bool = True
+    rows: dict[str, list] = field(default_factory=lambda: {k: [] for k in (
+        "kind", "start", "end", "center", "turn", "feed", "rapid", "laser", "power", "dwell_s",
+        "stop_before", "blend_tol", "event", "event_value", "line")})
+
+
+class _Block:
+    """The words of one block, grouped, with a record of which ones were used."""
+
+    def __init__(self, words: list[Word], file: str, line: int):
+        self.file, self.line = file, line
+        self.g: list[tuple[int, Word]] = []
+        self.m: list[tuple[int, Word]] = []
+        self.vals: dict[str, Word] = {}
+        self.used: set[str] = {"N"}
+        g_groups: dict[int, Word] = {}
+        m_groups: dict[int, Word] = {}
+        for w in words:
+            if w.letter not in _ALLOWED:
+                raise self.error(w, f"unsupported word {w.letter}{w.text}")
+            if w.letter in "GM":
+                code = round(w.value * 10) if w.letter == "G" else round(w.value)
+                exact = w.value * 10 if w.letter == "G" else w.value
+                table, groups = (_G_GROUP, g_groups) if w.letter == "G" else (_M_GROUP, m_groups)
+                if abs(exact - code) > 1e-9 or code not in table:
+                    what = _NOT_YET.get(code) if w.letter == "G" and abs(exact - code) < 1e-9 else None
+                    raise self.error(w, f"{what} is not supported yet" if what
+                                     else f"unknown or unsupported word {w.letter}{w.text}")
+                group = table[code]
+                if group in groups:
+                    other = groups[group]
+                    raise self.error(w, f"{w.letter}{w.text} and {other.letter}{other.text} are in the same modal "
+                                     "group; one per block")
+                groups[group] = w
+                (self.g if w.letter == "G" else self.m).append((code, w))
+            else:
+                if w.letter in self.vals:
+                    raise self.error(w, f"word {w.letter} appears twice in the block")
+                self.vals[w.letter] = w
+        if "N" in self.vals:
+            n = self.vals["N"]
+            if n.value < 0 or n.value != int(n.value):
+                raise self.error(n, f"line number N{n.text} must be a non-negative integer")
+
+    def error(self, w: Word | None, reason: str) -> SourceError:
+        return SourceError(self.file, self.line, w.column if w else 0, reason)
+
+    def has_g(self, code: int) -> Word | None:
+        return next((w for c, w in self.g if c == code), None)
+
+    def has_m(self, code: int) -> Word | None:
+        return next((w for c, w in self.m if c == code), None)
+
+    def take(self, letter: str) -> Word | None:
+        w = self.vals.get(letter)
+        if w is not None:
+            self.used.add(letter)
+        return w
+
+    def axis_words(self) -> dict[int, Word]:
+        return {i: self.vals[a] for i, a in enumerate(_AXES) if a in self.vals}
+
+    def check_all_used(self) -> None:
+        for letter, w in self.vals.items():
+            if letter not in self.used:
+                raise self.error(w, f"word {letter}{w.text} has no meaning in this block")
+
+
+class _Interpreter:
+    def __init__(self, file: str, start: np.ndarray, home: np.ndarray):
+        self.file = file
+        self.home = np.asarray(home, dtype=np.float64)
+        self.s = _State(pos=np.asarray(start, dtype=np.float64).copy())
+        self.ended = False
+
+    # -- rows -------------------------------------------------------------------------------
+    def emit(self, kind: Kind, line: int, end: np.ndarray | None = None, *, center=None, turn: int = 0,
+             feed: float = math.nan, rapid: bool = False, dwell_s: float = 0.0, event: int = 0,
+             event_value: int = 0) -> None:
+        s, r = self.s, self.s.rows
+        end = s.pos if end is None else end
+        r["kind"].append(int(kind))
+        r["start"].append(s.pos.copy())
+        r["end"].append(np.asarray(end, dtype=np.float64).copy())
+        r["center"].append(np.full(3, np.nan) if center is None else np.asarray(center, dtype=np.float64))
+        r["turn"].append(turn)
+        r["feed"].append(feed)
+        r["rapid"].append(rapid)
+        r["laser"].append(s.laser)
+        r["power"].append(s.power)
+        r["dwell_s"].append(dwell_s)
+        r["stop_before"].append(s.pending_stop or s.exact_stop or kind in (Kind.DWELL, Kind.EVENT))
+        r["blend_tol"].append(0.0 if s.exact_stop else s.blend_tol)
+        r["event"].append(event)
+        r["event_value"].append(event_value)
+        r["line"].append(line)
+        s.pos = np.asarray(end, dtype=np.float64).copy()
+        # Rows that stand still (dwell, events) leave the machine at rest for the next one.
+        s.pending_stop = kind in (Kind.DWELL, Kind.EVENT)
+
+    # -- one block --------------------------------------------------------------------------
+    def block(self, b: _Block) -> None:
+        s = self.s
+        # F, S, T
+        if (w := b.take("F")) is not None:
+            if w.value < 0:
+                raise b.error(w, f"negative feed F{w.text}")
+            s.feed_raw = w.value
+        if (w := b.take("S")) is not None:
+            if w.value < 0:
+                raise b.error(w, f"negative power S{w.text}")
+            s.power = w.value
+        if (w := b.take("T")) is not None:
+            if w.value < 0 or w.value != int(w.value):
+                raise b.error(w, f"tool number T{w.text} must be a non-negative integer")
+            s.tool = int(w.value)
+        # M6 tool change: the motion stops, the tool is changed, the program goes on.
+        if b.has_m(6) is not None:
+            self.emit(Kind.EVENT, b.line, event=Event.TOOL_CHANGE, event_value=s.tool)
+        # M3/M4/M5: the laser is switched at rest (like a spindle, motion waits for it).
+        for code, mode in ((3, LaserMode.CONSTANT), (4, LaserMode.DYNAMIC), (5, LaserMode.OFF)):
+            if b.has_m(code) is not None and s.laser != mode:
+                s.laser = mode
+                s.pending_stop = True
+        # G4 dwell
+        if (g4 := b.has_g(40)) is not None:
+            p = b.take("P")
+            if p is None:
+                raise b.error(g4, "G4 needs P (dwell time in seconds)")
+            if p.value < 0:
+                raise b.error(p, f"negative dwell time P{p.text}")
+            self.emit(Kind.DWELL, b.line, dwell_s=p.value)
+        # G17 plane (the only one so far), units, G40 (no compensation is active: nothing to do)
+        if b.has_g(200) is not None:
+            s.scale = MM_PER_INCH
+        if b.has_g(210) is not None:
+            s.scale = 1.0
+        # path control
+        if b.has_g(610) is not None:
+            s.exact_stop, s.blend_tol = False, 0.0
+        if b.has_g(611) is not None:
+            s.exact_stop, s.blend_tol = True, 0.0
+        if b.has_g(640) is not None:
+            s.exact_stop = False
+            p, q = b.take("P"), b.take("Q")
+            for w in (p, q):
+                if w is not None and w.value < 0:
+                    raise b.error(w, f"negative tolerance {w.letter}{w.text}")
+            s.blend_tol = p.value * s.scale if p is not None else math.inf
+        # distance mode
+        if b.has_g(900) is not None:
+            s.absolute = True
+        if b.has_g(910) is not None:
+            s.absolute = False
+        # motion mode
+        motion_word = None
+        for code in (0, 10, 20, 30):
+            if (w := b.has_g(code)) is not None:
+                s.motion, motion_word = code, w
+        axes = b.axis_words()
+        for letter in _AXES:
+            b.take(letter)
+        if (g28 := b.has_g(280)) is not None:
+            if motion_word is not None and axes:
+                raise b.error(g28, "G28 and a motion G code in one block both claim the axis words")
+            self.home_move(b, axes)
+        elif axes:
+            if s.motion is None:
+                w = next(iter(axes.values()))
+                raise b.error(w, "axis words with no motion mode (G0/G1/G2/G3) in effect")
+            self.motion(b, axes, motion_word)
+        elif motion_word is not None and s.motion in (20, 30):
+            raise b.error(motion_word, "arc needs end point words (X/Y equal to the start for a full circle)")
+        # stops and end
+        for code, ev in ((0, Event.PROGRAM_STOP), (1, Event.OPTIONAL_STOP), (2, Event.PROGRAM_END),
+                         (30, Event.PROGRAM_END)):
+            if b.has_m(code) is not None:
+                self.emit(Kind.EVENT, b.line, event=ev)
+                if ev == Event.PROGRAM_END:
+                    self.ended = True
+        b.check_all_used()
+
+    def target(self, axes: dict[int, Word]) -> np.ndarray:
+        s = self.s
+        t = s.pos.copy()
+        for i, w in axes.items():
+            t[i] = w.value * s.scale if s.absolute else s.pos[i] + w.value * s.scale
+        return t
+
+    def feed_mm_s(self, b: _Block, w: Word) -> float:
+        if self.s.feed_raw is None:
+            return math.nan  # the machine file's default contour feed applies
+        if self.s.feed_raw == 0:
+            raise b.error(w, "feed rate is zero (set F before feed moves)")
+        return self.s.feed_raw * self.s.scale / 60.0
+
+    def home_move(self, b: _Block, axes: dict[int, Word]) -> None:
+        """G28: rapid to the optional intermediate point, then the named axes (all if none) home."""
+        if axes:
+            mid = self.target(axes)
+            self.emit(Kind.LINE, b.line, mid, rapid=True)
+            dest = self.s.pos.copy()
+            for i in axes:
+                dest[i] = self.home[i]
+        else:
+            dest = self.home.copy()
+        self.emit(Kind.LINE, b.line, dest, rapid=True)
+
+    def motion(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
+        s = self.s
+        end = self.target(axes)
+        first = motion_word or next(iter(axes.values()))
+        if s.motion == 0:
+            self.emit(Kind.LINE, b.line, end, rapid=True)
+        elif s.motion == 10:
+            self.emit(Kind.LINE, b.line, end, feed=self.feed_mm_s(b, first))
+        else:
+            self.arc(b, end, first, cw=s.motion == 20)
+
+    def arc(self, b: _Block, end: np.ndarray, first: Word, cw: bool) -> None:
+        s = self.s
+        start = s.pos
+        if abs(end[2] - start[2]) > 1e-12:
+            raise b.error(b.vals.get("Z", first), "helical arcs (Z motion in G2/G3) are not supported yet")
+        i, j, k, r = b.take("I"), b.take("J"), b.take("K"), b.take("R")
+        if k is not None:
+            raise b.error(k, "K has no meaning for an arc in the XY plane (G17)")
+        if r is not None and (i is not None or j is not None):
+            raise b.error(r, "arc given both R and I/J; use one form")
+        chord = end[:2] - start[:2]
+        d = float(np.hypot(*chord))
+        if r is not None:
+            radius = abs(r.value) * s.scale
+            if d < 1e-9:
+                raise b.error(r, "R-form arc with end point equal to start: a full circle needs I/J")
+            if radius == 0:
+                raise b.error(r, "arc radius R is zero")
+            half = d / 2
+            if half > radius + ARC_RADIUS_TOL_MM:
+                raise b.error(r, f"arc radius {radius:g} mm is smaller than half the chord {half:g} mm")
+            h = math.sqrt(max(radius * radius - half * half, 0.0))
+            n_left = np.array([-chord[1], chord[0]]) / d  # left of the travel direction
+            # Short arcs (R > 0) have the centre on the side they turn towards; long ones opposite.
+            side = (-1.0 if cw else 1.0) * (1.0 if r.value > 0 else -1.0)
+            c2 = (start[:2] + end[:2]) / 2 + side * h * n_left
+        else:
+            if i is None and j is None:
+                raise b.error(first, "arc needs I/J (centre offset) or R (radius)")
+            off = np.array([i.value if i else 0.0, j.value if j else 0.0]) * s.scale
+            c2 = start[:2] + off
+            r1 = float(np.hypot(*(start[:2] - c2)))
+            r2 = float(np.hypot(*(end[:2] - c2)))
+            if r1 < 1e-9:
+                raise b.error(i or j, "arc centre coincides with its start point (radius zero)")
+            if abs(r1 - r2) > ARC_RADIUS_TOL_MM:
+                raise b.error(i or j, f"radius to end {r2:.6g} mm differs from radius to start {r1:.6g} mm by "
+                              f"{abs(r1 - r2):.3g} mm (tolerance {ARC_RADIUS_TOL_MM} mm)")
+            if d > 1e-9:
+                # Move the centre onto the chord's perpendicular bisector: the arc then passes
+                # exactly through both programmed points (a shift of at most the tolerance).
+                mid = (start[:2] + end[:2]) / 2
+                n = np.array([-chord[1], chord[0]]) / d
+                c2 = mid + float(np.dot(c2 - mid, n)) * n
+        center = np.array([c2[0], c2[1], start[2]])
+        self.emit(Kind.ARC, b.line, end, center=center, turn=-1 if cw else 1, feed=self.feed_mm_s(b, first))
+
+    def program(self) -> dict[str, np.ndarray]:
+        r = self.s.rows
+        out = {k: np.asarray(v) for k, v in r.items()}
+        for k in ("start", "end", "center"):
+            out[k] = np.asarray(r[k], dtype=np.float64).reshape(-1, 3)
+        return out
+
+
+def parse_gcode(text: str, file: str = "<string>", *, start: tuple[float, ...] | np.ndarray = (0.0, 0.0, 0.0),
+                home: tuple[float, ...] | np.ndarray | None = None) -> Program:
+    """Interpret G-code ``text`` into a Program.
+
+    Args:
+        text: the program.
+        file: its name, used in error messages and kept in the Program.
+        start: machine position (x, y, z) in mm when the program starts.
+        home: G28 home position (x, y, z) in mm; defaults to ``start``.
+
+    Raises:
+        SourceError: naming ``file:line:column``, the word and the reason.
+    """
+    home_arr = np.asarray(start if home is None else home, dtype=np.float64)
+    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr)
+    percent_seen = False
+    for line_no, raw in enumerate(text.splitlines(), 1):
+        if raw.strip() == "%":
+            if percent_seen:
+                break  # the second '%' ends the program
+            percent_seen = True
+            continue
+        words, _comments = tokenize(raw, file, line_no)
+        if not words:
+            continue
+        it.block(_Block(words, file, line_no))
+        if it.ended:
+            break
+    return program_from_columns(file=file, **it.program())
+
+
+def load_gcode(path: str | Path, **kwargs) -> Program:
+    """Read and interpret a G-code file (ISO-7bit/ASCII or UTF-8); see :func:`parse_gcode`."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise SourceError(str(p), 0, 0, f"cannot read program: {exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise SourceError(str(p), line, 0, f"byte 0x{data[exc.start]:02x} is not ISO-7bit/UTF-8 text") from None
+    if "\x00" in text:
+        line = text[: text.index("\x00")].count("\n") + 1
+        raise SourceError(str(p), line, 0, "NUL byte: this is not a text program")
+    return parse_gcode(text, str(p), **kwargs)

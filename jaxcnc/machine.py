@@ -1,0 +1,345 @@
+"""The machine description: a TOML file loaded into a typed, validated, immutable config.
+
+Every planner reads one :class:`MachineConfig`. Loading checks every key; any mistake raises
+:class:`~jaxcnc.errors.MachineFileError` naming the file, the line, the key and the reason.
+
+Units: lengths in mm, speeds in mm/s, accelerations in mm/s², jerks in mm/s³, rates in Hz.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jaxcnc.errors import MachineFileError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+#: Axis names a machine may declare, in table column order.
+AXIS_NAMES = ("x", "y", "z", "a", "b", "c", "u", "v", "w")
+#: Axes every machine must have: arcs and contours live in the XY plane.
+REQUIRED_AXES = ("x", "y")
+#: Positions are stored as int32 discretes in the table file.
+_INT32_MAX = 2**31 - 1
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    """Limits of one axis. ``j_max`` is ``None`` for an acceleration-limited axis."""
+
+    name: str
+    v_max: float  # mm/s
+    a_max: float  # mm/s²
+    j_max: float | None  # mm/s³
+    min: float  # mm
+    max: float  # mm
+    home: float  # mm, where the machine stands when a program starts
+
+
+@dataclass(frozen=True)
+class PathConfig:
+    """Contour defaults: speeds the program may not exceed, tolerances of the path."""
+
+    feed: float  # mm/s, contour feed when the program sets none
+    rapid: float  # mm/s, cap on G0 moves
+    chord_tol_mm: float  # max chord error between consecutive ticks
+    corner_tol_mm: float  # 0 = exact corners
+
+
+@dataclass(frozen=True)
+class LaserConfig:
+    """How the laser is driven: continuous, point-by-point pulsed, or position-synchronised."""
+
+    mode: str = "cw"  # "cw" | "pulsed" | "pso"
+    pulse_hz: float | None = None
+    tolerance: float = 0.05
+    idle_pulses: bool = True
+    pso_mm: float | None = None
+
+
+@dataclass(frozen=True)
+class ScannerConfig:
+    """Additional fast axes summed with the main axes (galvo or light stage)."""
+
+    axes: tuple[str, ...]
+    field_mm: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class MachineConfig:
+    """A validated, immutable machine description."""
+
+    name: str
+    tick_hz: float
+    discrete_mm: float
+    axes: tuple[AxisConfig, ...]
+    path: PathConfig
+    laser: LaserConfig = field(default_factory=LaserConfig)
+    scanner: ScannerConfig | None = None
+    source: str = "<memory>"
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    @property
+    def dt(self) -> float:
+        """The tick period in seconds."""
+        return 1.0 / self.tick_hz
+
+    def axis(self, name: str) -> AxisConfig:
+        for a in self.axes:
+            if a.name == name:
+                return a
+        raise KeyError(name)
+
+    def limits(self, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+        """Per-axis limit arrays for ``names`` (axes the machine lacks get ``nan``).
+
+        Returns a dict of arrays of shape ``(len(names),)``: ``v_max``, ``a_max``, ``j_max``
+        (``inf`` where unset), ``min``, ``max``, ``home``.
+        """
+        out: dict[str, list[float]] = {k: [] for k in ("v_max", "a_max", "j_max", "min", "max", "home")}
+        for n in names:
+            a = self.axis(n) if n in self.axis_names else None
+            for k in out:
+                v = getattr(a, k) if a is not None else math.nan
+                out[k].append(math.inf if (k == "j_max" and v is None) else v)
+        return {k: np.asarray(v, dtype=np.float64) for k, v in out.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# Schema: key -> (kind, required, default, check). Kinds: "number", "string", "bool",
+# "string_list", "number_list". Checks return an error text or None.
+
+
+def _positive(v: float) -> str | None:
+    return None if v > 0 and math.isfinite(v) else "must be a positive finite number"
+
+
+def _nonneg(v: float) -> str | None:
+    return None if v >= 0 and math.isfinite(v) else "must be zero or a positive finite number"
+
+
+def _finite(v: float) -> str | None:
+    return None if math.isfinite(v) else "must be a finite number"
+
+
+def _speed(v: float) -> str | None:
+    if (e := _positive(v)) is not None:
+        return e
+    if v > 1e5:
+        return f"{v:g} mm/s is faster than any stage or scanner (100 m/s); was it given in mm/min?"
+    return None
+
+
+def _discrete(v: float) -> str | None:
+    if (e := _positive(v)) is not None:
+        return e
+    if v > 0.1:
+        return f"{v:g} mm per discrete is coarser than 0.1 mm; did you mean {v / 1000:g} (in mm)?"
+    return None
+
+
+def _fraction(v: float) -> str | None:
+    return None if 0 <= v < 1 else "must be a fraction in [0, 1)"
+
+
+def _laser_mode(v: str) -> str | None:
+    return None if v in ("cw", "pulsed", "pso") else f"unknown laser mode {v!r}; expected cw, pulsed or pso"
+
+
+Check = Callable[[Any], "str | None"] | None
+_SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
+    "machine": {
+        "name": ("string", False, "machine", None),
+        "tick_hz": ("number", True, None, _positive),
+        "discrete_mm": ("number", False, 0.001, _discrete),
+    },
+    "axis": {
+        "v_max": ("number", True, None, _speed),
+        "a_max": ("number", True, None, _positive),
+        "j_max": ("number", False, None, _positive),
+        "min": ("number", True, None, _finite),
+        "max": ("number", True, None, _finite),
+        "home": ("number", False, None, _finite),
+    },
+    "path": {
+        "feed": ("number", True, None, _speed),
+        "rapid": ("number", True, None, _speed),
+        "chord_tol_mm": ("number", False, 0.001, _positive),
+        "corner_tol_mm": ("number", False, 0.0, _nonneg),
+    },
+    "laser": {
+        "mode": ("string", False, "cw", _laser_mode),
+        "pulse_hz": ("number", False, None, _positive),
+        "tolerance": ("number", False, 0.05, _fraction),
+        "idle_pulses": ("bool", False, True, None),
+        "pso_mm": ("number", False, None, _positive),
+    },
+    "scanner": {
+        "axes": ("string_list", True, None, None),
+        "field_mm": ("number_list", True, None, None),
+    },
+}
+_TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner")
+
+
+class _Loader:
+    """Validates a parsed TOML document; knows the text to find line numbers for keys."""
+
+    def __init__(self, file: str, text: str):
+        self.file, self.lines = file, text.splitlines()
+
+    def line_of(self, table: str, key: str | None = None) -> int:
+        """1-based line where ``key`` is set inside ``[table]`` (or the table header); 0 if unknown."""
+        current, header_line = "", 0
+        for i, raw in enumerate(self.lines, 1):
+            s = raw.split("#", 1)[0].strip()
+            m = re.fullmatch(r"\[\s*([^\[\]]+?)\s*\]", s)
+            if m:
+                current = re.sub(r"\s*\.\s*", ".", m.group(1)).replace('"', "")
+                if current == table:
+                    header_line = i
+                continue
+            if key is None:
+                continue
+            kv = re.match(r"([A-Za-z0-9_.\-\"]+)\s*=", s)
+            if not kv:
+                continue
+            full = (current + "." if current else "") + kv.group(1).replace('"', "")
+            if full == f"{table}.{key}" if table else full == key:
+                return i
+        return header_line
+
+    def fail(self, table: str, key: str | None, reason: str) -> MachineFileError:
+        dotted = f"{table}.{key}" if key else table
+        return MachineFileError(self.file, dotted, reason, self.line_of(table, key))
+
+    def section(self, table: str, raw: Any, kind: str) -> dict[str, Any]:
+        """Check one table against the schema ``kind``; return its values with defaults."""
+        if not isinstance(raw, Mapping):
+            raise self.fail(table, None, f"must be a table, got {type(raw).__name__}")
+        schema = _SCHEMA[kind]
+        for key in raw:
+            if key not in schema:
+                known = ", ".join(schema)
+                raise self.fail(table, key, f"unknown key {key!r}; known keys here: {known}")
+        out: dict[str, Any] = {}
+        for key, (typ, required, default, check) in schema.items():
+            if key not in raw:
+                if required:
+                    raise self.fail(table, None, f"missing required key {key!r}")
+                out[key] = default
+                continue
+            v = self.typed(table, key, raw[key], typ)
+            if check is not None and (err := check(v)) is not None:
+                raise self.fail(table, key, f"{v!r}: {err}")
+            out[key] = v
+        return out
+
+    def typed(self, table: str, key: str, v: Any, typ: str) -> Any:
+        def is_num(x: Any) -> bool:
+            return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+        ok = {
+            "number": is_num(v),
+            "string": isinstance(v, str),
+            "bool": isinstance(v, bool),
+            "string_list": isinstance(v, list) and all(isinstance(x, str) for x in v),
+            "number_list": isinstance(v, list) and all(is_num(x) for x in v),
+        }[typ]
+        if not ok:
+            want = {"number": "a number", "string": "a string", "bool": "true or false",
+                    "string_list": "a list of strings", "number_list": "a list of numbers"}[typ]
+            raise self.fail(table, key, f"expected {want}, got {v!r} ({type(v).__name__})")
+        if typ == "number":
+            return float(v)
+        if typ == "number_list":
+            return tuple(float(x) for x in v)
+        if typ == "string_list":
+            return tuple(v)
+        return v
+
+    def load(self, doc: Mapping[str, Any]) -> MachineConfig:
+        for key in doc:
+            if key not in _TOP_LEVEL:
+                raise self.fail(key, None, f"unknown table [{key}]; known tables: {', '.join(_TOP_LEVEL)}")
+        for key in ("machine", "axes", "path"):
+            if key not in doc:
+                raise MachineFileError(self.file, key, f"missing required table [{key}]")
+        m = self.section("machine", doc["machine"], "machine")
+        path = self.section("path", doc["path"], "path")
+        laser = self.section("laser", doc.get("laser", {}), "laser")
+        axes_raw = doc["axes"]
+        if not isinstance(axes_raw, Mapping):
+            raise self.fail("axes", None, "must be a table of axis tables such as [axes.x]")
+        for name in axes_raw:
+            if name not in AXIS_NAMES:
+                raise self.fail(f"axes.{name}", None, f"unknown axis {name!r}; axes are {', '.join(AXIS_NAMES)}")
+        for name in REQUIRED_AXES:
+            if name not in axes_raw:
+                raise MachineFileError(self.file, f"axes.{name}", f"missing axis {name!r}: a [axes.{name}] table "
+                                       "is required", self.line_of("axes"))
+        axes = []
+        for name in (n for n in AXIS_NAMES if n in axes_raw):
+            a = self.section(f"axes.{name}", axes_raw[name], "axis")
+            if a["min"] >= a["max"]:
+                raise self.fail(f"axes.{name}", "min", f"min ({a['min']:g}) must be below max ({a['max']:g})")
+            if a["home"] is None:
+                a["home"] = min(max(0.0, a["min"]), a["max"])
+            elif not a["min"] <= a["home"] <= a["max"]:
+                raise self.fail(f"axes.{name}", "home", f"home {a['home']:g} is outside [{a['min']:g}, {a['max']:g}]")
+            reach = max(abs(a["min"]), abs(a["max"])) / m["discrete_mm"]
+            if reach > _INT32_MAX:
+                raise self.fail("machine", "discrete_mm", f"axis {name} travel {reach:.3g} discretes exceeds int32; "
+                                "use a coarser discrete")
+            axes.append(AxisConfig(name=name, **a))
+        if laser["mode"] == "pulsed" and laser["pulse_hz"] is None:
+            raise self.fail("laser", None, "mode 'pulsed' needs pulse_hz")
+        if laser["mode"] == "pso" and laser["pso_mm"] is None:
+            raise self.fail("laser", None, "mode 'pso' needs pso_mm")
+        scanner = None
+        if "scanner" in doc:
+            sc = self.section("scanner", doc["scanner"], "scanner")
+            for n in sc["axes"]:
+                if n not in axes_raw:
+                    raise self.fail("scanner", "axes", f"scanner axis {n!r} has no [axes.{n}] table")
+            if len(sc["field_mm"]) != len(sc["axes"]) or any(f <= 0 for f in sc["field_mm"]):
+                raise self.fail("scanner", "field_mm", "needs one positive field size per scanner axis")
+            scanner = ScannerConfig(axes=sc["axes"], field_mm=sc["field_mm"])
+        return MachineConfig(
+            name=m["name"], tick_hz=m["tick_hz"], discrete_mm=m["discrete_mm"], axes=tuple(axes),
+            path=PathConfig(**path), laser=LaserConfig(**laser), scanner=scanner, source=self.file,
+        )
+
+
+def parse_machine(text: str, file: str = "<string>") -> MachineConfig:
+    """Parse and validate machine TOML ``text``; ``file`` names it in error messages."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"line (\d+)", msg)
+        raise MachineFileError(file, "", f"not valid TOML: {msg}", int(m.group(1)) if m else 0) from None
+    return _Loader(file, text).load(doc)
+
+
+def load_machine(path: str | Path) -> MachineConfig:
+    """Load and validate the machine file at ``path``."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MachineFileError(str(p), "", f"cannot read machine file: {exc}") from None
+    return parse_machine(text, str(p))
