@@ -1,0 +1,12 @@
+"""Velocity planners: machine limits → the time law ``s(t)`` of the whole program.
+
+Importing this package registers the built-in planners (``lookahead``).
+"""
+
+from jaxcnc.planners import trapezoid  # noqa: F401  (registers "lookahead")
+from jaxcnc.planners.job import PlannedJob, plan_job, program_start
+from jaxcnc.planners.registry import get_planner, planner_names, register_planner
+from jaxcnc.planners.timelaw import Plan
+
+__all__ = ["Plan", "PlannedJob", "get_planner", "plan_job", "planner_names", "program_start",
+           "register_planner"]

@@ -1,0 +1,93 @@
+"""A planned job: Program → spans → Plan for one machine, with the machine-level checks.
+
+Checks done here, each an error naming the program's file and line: the program moves an axis
+the machine lacks; some span leaves the machine's travel.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from jaxcnc.errors import PlanningError, SourceError
+from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
+from jaxcnc.machine import MachineConfig
+from jaxcnc.planners.registry import get_planner
+from jaxcnc.planners.timelaw import Plan
+from jaxcnc.program import PROGRAM_AXES, Kind, Program
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedJob:
+    """Everything the tick stage needs: the program, its spans, their time law, the machine.
+
+    ``axis_source[i]`` is the program column (0..2 for x, y, z) feeding machine axis ``i``, or -1
+    for a machine axis the program does not drive (it stays at its home).
+    """
+
+    program: Program
+    spans: Spans
+    plan: Plan
+    machine: MachineConfig
+    axis_source: tuple[int, ...]
+    plan_wall_s: float
+
+    @property
+    def path_length_mm(self) -> float:
+        return float(np.sum(self.spans.length))
+
+
+def program_start(machine: MachineConfig) -> np.ndarray:
+    """Machine position (x, y, z) at program start: each axis' home, 0 for absent axes."""
+    names = machine.axis_names
+    return np.array([machine.axis(a).home if a in names else 0.0 for a in PROGRAM_AXES])
+
+
+def _check_axes(program: Program, machine: MachineConfig) -> tuple[int, ...]:
+    names = machine.axis_names
+    for col, axis in enumerate(PROGRAM_AXES):
+        if axis not in names and program.uses_axis(col):
+            moved = np.flatnonzero(program.end[:, col] != program.start[:, col])
+            line = int(program.line[moved[0]]) if moved.size else 0
+            raise SourceError(program.file, line, 0, f"the program moves axis {axis.upper()} but machine "
+                              f"{machine.name!r} has no axis {axis!r}")
+    return tuple(PROGRAM_AXES.index(a) if a in PROGRAM_AXES else -1 for a in names)
+
+
+def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> None:
+    for col, axis in enumerate(PROGRAM_AXES):
+        if axis not in machine.axis_names:
+            continue
+        ax = machine.axis(axis)
+        bad = np.flatnonzero((spans.lo[:, col] < ax.min - 1e-9) | (spans.hi[:, col] > ax.max + 1e-9))
+        if bad.size:
+            k = bad[0]
+            value = spans.lo[k, col] if spans.lo[k, col] < ax.min else spans.hi[k, col]
+            raise SourceError(program.file, int(program.line[spans.block[k]]), 0,
+                              f"{axis.upper()} reaches {value:.6g} mm, outside the travel of machine "
+                              f"{machine.name!r} [{ax.min:g}, {ax.max:g}]")
+
+
+def plan_job(program: Program, machine: MachineConfig, planner: str = "lookahead") -> PlannedJob:
+    """Plan ``program`` on ``machine`` with the named planner."""
+    t0 = time.perf_counter()
+    axis_source = _check_axes(program, machine)
+    spans = build_spans(program)
+    if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
+        raise PlanningError(f"{program.file}: the program has no motion")
+    _check_travel(program, spans, machine)
+    rows = spans.block
+    rapid = program.rapid[rows]
+    prog_feed = program.feed[rows]
+    feed = np.where(rapid, machine.path.rapid, np.where(np.isnan(prog_feed), machine.path.feed, prog_feed))
+    dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
+    first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
+    stop = program.stop_before[rows] & first_of_block
+    lim = machine.limits(PROGRAM_AXES)
+    v_max = np.where(np.isnan(lim["v_max"]), np.inf, lim["v_max"])
+    a_max = np.where(np.isnan(lim["a_max"]), np.inf, lim["a_max"])
+    plan = get_planner(planner)(spans, feed, dwell, stop, v_max, a_max, machine)
+    return PlannedJob(program=program, spans=spans, plan=plan, machine=machine, axis_source=axis_source,
+                      plan_wall_s=time.perf_counter() - t0)

@@ -1,0 +1,93 @@
+"""Per-span speed and acceleration caps and per-junction speed caps, from the machine limits.
+
+Everything is a batched JAX function of span arrays; speeds are handled as ``x = v²``.
+
+Acceleration budget. The table is verified at the tick rate by second differences of positions,
+so a velocity step ``Δv`` at a junction (a kink the path passes without stopping) reads as an
+acceleration ``Δv / dt`` there. Each axis' ``a_max`` is therefore split: ``(1 - JUNCTION_SHARE)``
+for smooth motion (tangential plus centripetal) and ``JUNCTION_SHARE`` for junction steps, which
+bounds every second difference by ``a_max``.
+
+Lines. With unit direction ``e``, axis ``i`` moves at ``v·e_i`` and accelerates at ``a_t·e_i``:
+``v ≤ min_i v_max_i / |e_i|`` and ``a_t ≤ min_i a_i / |e_i|`` (``a_i`` the smooth budget).
+
+Arcs (XY plane, radius r). Axis acceleration is ``a_t T_i + (v²/r) N_i`` with ``T``, ``N`` the unit
+tangent and normal; as ``T_x² + N_x² = T_y² + N_y² = 1`` in the plane, Cauchy–Schwarz gives
+``|a_i| ≤ sqrt(a_t² + a_n²)``. The speed is capped so that the centripetal part uses at most
+``ARC_NORMAL_SHARE`` of ``A = min(a_x, a_y)``: ``v² ≤ ARC_NORMAL_SHARE · A · r``; the tangential
+budget is what remains at the cap speed, ``a_t = sqrt(A² - (v_cap²/r)²)``.
+
+Chord error. Drives interpolate linearly between ticks; a chord subtending ``Δθ`` on radius r has
+sagitta ``r (1 - cos(Δθ/2))``, so ``chord_tol`` allows ``Δθ = 2 acos(1 - tol/r)`` per tick:
+``v ≤ r Δθ · tick_hz``.
+
+Junctions. A velocity step ``v |ΔT_i|`` within one tick must stay within
+``JUNCTION_SHARE · a_max_i · dt``, which gives ``v ≤ JUNCTION_SHARE · a_max_i · dt / |ΔT_i|``.
+Junctions turning more than ``CORNER_ANGLE_RAD`` are corners: exact stop (v = 0).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.geometry.spans import SpanKind
+
+JUNCTION_SHARE = 0.05
+ARC_NORMAL_SHARE = 2**-0.5
+CORNER_ANGLE_RAD = 0.0175  # 1°
+
+
+def span_caps(kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, tangent: jnp.ndarray,
+              feed_mm_s: jnp.ndarray, v_max: jnp.ndarray, a_max: jnp.ndarray, chord_tol_mm: float,
+              tick_hz: float) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Speed cap (as v², mm²/s²) and tangential acceleration cap (mm/s²) of each span.
+
+    Args:
+        kind, length, radius: ``(n,)`` span arrays.
+        tangent: ``(n, 3)`` unit tangent of lines (any unit vector for arcs).
+        feed_mm_s: ``(n,)`` programmed speed (feed or rapid cap) of each span.
+        v_max, a_max: ``(3,)`` axis limits for x, y, z (``inf`` where the machine lacks the axis).
+    Returns:
+        ``(x_cap, a_t)``, both ``(n,)``. Point spans get ``x_cap = 0``.
+    """
+    a_smooth = (1.0 - JUNCTION_SHARE) * a_max
+    comp = jnp.abs(tangent)
+    inv = jnp.where(comp > 0, 1.0 / jnp.where(comp > 0, comp, 1.0), jnp.inf)
+    v_line = jnp.min(v_max[None, :] * inv, axis=1)
+    a_line = jnp.min(a_smooth[None, :] * inv, axis=1)
+
+    is_arc = kind == SpanKind.ARC
+    r = jnp.where(is_arc, radius, 1.0)
+    a_plane = jnp.minimum(a_smooth[0], a_smooth[1])
+    v_arc = jnp.minimum(v_max[0], v_max[1])
+    x_centripetal = ARC_NORMAL_SHARE * a_plane * r
+    cos_half = jnp.clip(1.0 - chord_tol_mm / r, -1.0, 1.0)
+    v_chord = r * 2.0 * jnp.arccos(cos_half) * tick_hz
+    x_arc = jnp.minimum(jnp.minimum(v_arc, v_chord) ** 2, x_centripetal)
+
+    x_axis = jnp.where(is_arc, x_arc, v_line**2)
+    x_cap = jnp.minimum(x_axis, feed_mm_s**2)
+    a_n = x_cap / r
+    a_arc = jnp.sqrt(jnp.maximum(a_plane**2 - a_n**2, 0.0))
+    a_t = jnp.where(is_arc, a_arc, a_line)
+    is_point = kind == SpanKind.POINT
+    return jnp.where(is_point, 0.0, x_cap), jnp.where(is_point, jnp.inf, a_t)
+
+
+def junction_caps(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray, a_max: jnp.ndarray,
+                  tick_hz: float) -> jnp.ndarray:
+    """Cap (v²) on the speed through each junction from the velocity step it causes.
+
+    Args:
+        tangent_out_prev: ``(m, 3)`` unit tangent at the end of the span before the junction.
+        tangent_in: ``(m, 3)`` unit tangent at the start of the span after it.
+        a_max: ``(3,)`` axis accelerations.
+    Returns:
+        ``(m,)`` v² caps; 0 at corners (turn above ``CORNER_ANGLE_RAD``).
+    """
+    d = jnp.abs(tangent_in - tangent_out_prev)
+    budget = JUNCTION_SHARE * a_max / tick_hz  # mm/s of velocity step per axis
+    v = jnp.min(jnp.where(d > 0, budget[None, :] / jnp.where(d > 0, d, 1.0), jnp.inf), axis=1)
+    corner = jnp.linalg.norm(tangent_in - tangent_out_prev, axis=1) > 2.0 * jnp.sin(CORNER_ANGLE_RAD / 2)
+    return jnp.where(corner, 0.0, v**2)

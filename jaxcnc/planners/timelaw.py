@@ -1,0 +1,163 @@
+"""The time law ``s(t)``: trapezoidal speed profiles per span, aligned to the tick grid.
+
+Given ``v²`` at the junction nodes (from :mod:`jaxcnc.planners.lookahead`), span ``k`` accelerates
+from ``v0`` at ``a``, may cruise at ``vp``, and decelerates to ``v1``. The peak comes from meeting
+the two parabolas: ``vp² = min(cap, (v0² + v1²)/2 + a L)``; the phase lengths are
+``L_acc = (vp² - v0²)/(2a)``, ``L_dec = (vp² - v1²)/(2a)``, ``L_cru = L - L_acc - L_dec`` and the
+times ``t = 2 L / (v_begin + v_end)`` per ramp, ``L_cru / vp`` for the cruise.
+
+Tick alignment. Between two junctions where the motion is at rest (a *group*: rest-to-rest
+motion, or a dwell) the time law is stretched by ``λ = ceil(T f) / (T f) ≥ 1`` so the group lasts
+a whole number of ticks. Stretching time by λ divides speeds by λ and accelerations by λ², so
+the limits still hold, and every rest point — every block that ends at rest — falls exactly on
+a tick. Time is kept as an int64 group start tick plus a float offset (in ticks) inside the
+group, so an hour at 100 kHz loses no precision.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """The time law of a whole program, one segment per span (NumPy arrays ``(n,)``).
+
+    Segment ``k`` starts at tick ``group_tick[k] + offset_ticks[k]`` (fractional), runs
+    ``t_acc, t_cru, t_dec`` seconds (a dwell is all cruise at zero speed), with speeds
+    ``v0 → vp → v1`` mm/s and ramp accelerations ``a_acc``, ``a_dec`` mm/s². ``first_tick[k]`` is
+    the first tick at or after its start. The table has ticks ``0..n_ticks``.
+    """
+
+    length: np.ndarray
+    v0: np.ndarray
+    vp: np.ndarray
+    v1: np.ndarray
+    a_acc: np.ndarray
+    a_dec: np.ndarray
+    t_acc: np.ndarray
+    t_cru: np.ndarray
+    t_dec: np.ndarray
+    group_tick: np.ndarray
+    offset_ticks: np.ndarray
+    first_tick: np.ndarray
+    n_ticks: int
+    tick_hz: float
+
+    def __len__(self) -> int:
+        return int(self.length.shape[0])
+
+    @property
+    def total_time_s(self) -> float:
+        return self.n_ticks / self.tick_hz
+
+    @property
+    def duration_s(self) -> np.ndarray:
+        return self.t_acc + self.t_cru + self.t_dec
+
+
+def _safe_div(num: jnp.ndarray, den: jnp.ndarray) -> jnp.ndarray:
+    ok = den > 0
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
+
+
+def trapezoids(x_node: jnp.ndarray, x_cap: jnp.ndarray, a: jnp.ndarray, length: jnp.ndarray,
+               dwell_s: jnp.ndarray) -> dict[str, jnp.ndarray]:
+    """Per-span trapezoid from node ``v²`` ``(n+1,)`` and span caps/accel/length/dwell ``(n,)``."""
+    x0, x1 = x_node[:-1], x_node[1:]
+    a_fin = jnp.where(jnp.isfinite(a), a, 0.0)
+    xp = jnp.minimum(x_cap, 0.5 * (x0 + x1) + a_fin * length)
+    xp = jnp.maximum(xp, jnp.maximum(x0, x1))  # rounding of the passes
+    l_acc = _safe_div(xp - x0, 2.0 * a_fin)
+    l_dec = _safe_div(xp - x1, 2.0 * a_fin)
+    over = l_acc + l_dec
+    shrink = jnp.where(over > length, _safe_div(length, over), 1.0)
+    l_acc, l_dec = l_acc * shrink, l_dec * shrink
+    l_cru = jnp.maximum(length - l_acc - l_dec, 0.0)
+    v0, vp, v1 = jnp.sqrt(x0), jnp.sqrt(xp), jnp.sqrt(x1)
+    t_acc = _safe_div(2.0 * l_acc, v0 + vp)
+    t_dec = _safe_div(2.0 * l_dec, vp + v1)
+    t_cru = _safe_div(l_cru, vp) + dwell_s
+    # Ramp accelerations from the realised times: s(t) then ends exactly at L.
+    return dict(v0=v0, vp=vp, v1=v1, t_acc=t_acc, t_cru=t_cru, t_dec=t_dec,
+                a_acc=_safe_div(vp - v0, t_acc), a_dec=_safe_div(vp - v1, t_dec))
+
+
+def _segmented_cumsum(values: jnp.ndarray, starts: jnp.ndarray) -> jnp.ndarray:
+    """Inclusive cumulative sum that restarts where ``starts`` is True (parallel scan)."""
+
+    def op(a, b):
+        fa, va = a
+        fb, vb = b
+        return fa | fb, jnp.where(fb, vb, va + vb)
+
+    _, out = jax.lax.associative_scan(op, (starts, values))
+    return out
+
+
+def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_hz: float
+                   ) -> dict[str, jnp.ndarray]:
+    """Stretch each rest-to-rest group to a whole number of ticks and place segments on the grid.
+
+    Args:
+        prof: output of :func:`trapezoids`.
+        rest_start: ``(n,)`` bool, the motion is at rest at the start of the span (a group starts).
+    Returns:
+        ``prof`` scaled, plus ``group_tick`` (int64), ``offset_ticks``, ``first_tick`` (int64) and
+        ``n_ticks`` (scalar int64).
+    """
+    n = rest_start.shape[0]
+    dur_ticks = (prof["t_acc"] + prof["t_cru"] + prof["t_dec"]) * tick_hz
+    group = jnp.cumsum(rest_start.astype(jnp.int64)) - 1
+    g_ticks = jax.ops.segment_sum(dur_ticks, group, num_segments=n)
+    # 1e-9 guards against ceil(5.000000000001) = 6 from rounding of the sums
+    g_whole = jnp.ceil(g_ticks - 1e-9).astype(jnp.int64)
+    g_whole = jnp.maximum(g_whole, 0)
+    lam = jnp.where(g_ticks > 0, g_whole / jnp.where(g_ticks > 0, g_ticks, 1.0), 1.0)
+    lam_k = jnp.maximum(lam[group], 1.0)
+    out = dict(prof)
+    for key in ("t_acc", "t_cru", "t_dec"):
+        out[key] = prof[key] * lam_k
+    for key in ("v0", "vp", "v1"):
+        out[key] = prof[key] / lam_k
+    for key in ("a_acc", "a_dec"):
+        out[key] = prof[key] / lam_k**2
+    dur = dur_ticks * lam_k
+    g_start = jnp.cumsum(g_whole) - g_whole
+    offset = _segmented_cumsum(dur, rest_start) - dur
+    out["group_tick"] = g_start[group]
+    out["offset_ticks"] = offset
+    out["first_tick"] = out["group_tick"] + jnp.ceil(offset).astype(jnp.int64)
+    out["n_ticks"] = jnp.sum(g_whole)
+    return out
+
+
+def s_at(plan: dict[str, jnp.ndarray], length: jnp.ndarray, seg: jnp.ndarray, tick: jnp.ndarray,
+         tick_hz: float) -> jnp.ndarray:
+    """Arc length from the start of segment ``seg`` at integer ``tick`` (arrays ``(m,)``).
+
+    ``plan`` holds the per-segment arrays of :class:`Plan` (as JAX arrays).
+    """
+    g = plan["group_tick"][seg]
+    tau = ((tick - g).astype(jnp.float64) - plan["offset_ticks"][seg]) / tick_hz
+    tau = jnp.maximum(tau, 0.0)
+    v0, vp, aa, ad = plan["v0"][seg], plan["vp"][seg], plan["a_acc"][seg], plan["a_dec"][seg]
+    ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
+    l_acc = v0 * ta + 0.5 * aa * ta**2
+    t1 = jnp.minimum(tau, ta)
+    s_acc = v0 * t1 + 0.5 * aa * t1**2
+    t2 = jnp.clip(tau - ta, 0.0, tc)
+    t3 = jnp.clip(tau - ta - tc, 0.0, td)
+    s = jnp.where(tau < ta, s_acc, l_acc + vp * t2 + vp * t3 - 0.5 * ad * t3**2)
+    return jnp.clip(s, 0.0, length[seg])
+
+
+def segment_of_tick(first_tick: jnp.ndarray, tick: jnp.ndarray) -> jnp.ndarray:
+    """Index of the segment that holds each tick: the last one whose first tick is ≤ it."""
+    return jnp.clip(jnp.searchsorted(first_tick, tick, side="right") - 1, 0, first_tick.shape[0] - 1)

@@ -1,0 +1,78 @@
+"""The default planner ``lookahead``: whole-program acceleration-limited trapezoids.
+
+Caps (:mod:`~jaxcnc.planners.limits`) → two parallel look-ahead scans
+(:mod:`~jaxcnc.planners.lookahead`) → trapezoid per span and tick alignment
+(:mod:`~jaxcnc.planners.timelaw`), all in one jitted array program. Inputs are padded to a
+power-of-two bucket so a new job of similar size reuses the compiled program.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.geometry.spans import SpanKind, Spans
+from jaxcnc.machine import MachineConfig
+from jaxcnc.planners.limits import junction_caps, span_caps
+from jaxcnc.planners.lookahead import lookahead
+from jaxcnc.planners.registry import register_planner
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
+
+MIN_BUCKET = 256
+
+
+def bucket_size(n: int) -> int:
+    """The padded length for ``n`` items: the next power of two, at least ``MIN_BUCKET``."""
+    return max(MIN_BUCKET, 1 << max(0, int(n - 1).bit_length()))
+
+
+@jax.jit
+def plan_arrays(kind, length, radius, tangent_in, tangent_out, feed, dwell, stop_before, v_max, a_max,
+                chord_tol, tick_hz):
+    """The planner as one array program; all span arrays ``(n,)`` or ``(n, 3)``.
+
+    Returns the dict of :func:`~jaxcnc.planners.timelaw.align_to_ticks` plus ``x_node`` (v² at
+    the ``n+1`` nodes).
+    """
+    x_cap, a_t = span_caps(kind, length, radius, tangent_in, feed, v_max, a_max, chord_tol, tick_hz)
+    j_cap = junction_caps(tangent_out[:-1], tangent_in[1:], a_max, tick_hz)
+    j_cap = jnp.where(stop_before[1:], 0.0, j_cap)
+    j_cap = jnp.minimum(j_cap, jnp.minimum(x_cap[:-1], x_cap[1:]))
+    zero = jnp.zeros((1,), jnp.float64)
+    node_cap = jnp.concatenate([zero, j_cap, zero])
+    delta = jnp.where(kind == SpanKind.POINT, 0.0, 2.0 * a_t * length)
+    x_node = lookahead(node_cap, delta)
+    prof = trapezoids(x_node, x_cap, a_t, length, dwell)
+    out = align_to_ticks(prof, x_node[:-1] == 0.0, tick_hz)
+    out["x_node"] = x_node
+    return out
+
+
+def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
+    pad = [(0, n - a.shape[0])] + [(0, 0)] * (a.ndim - 1)
+    return np.pad(a, pad, constant_values=fill)
+
+
+@register_planner("lookahead")
+def plan_lookahead(spans: Spans, span_feed_mm_s: np.ndarray, span_dwell_s: np.ndarray,
+                   span_stop_before: np.ndarray, axis_v_max: np.ndarray, axis_a_max: np.ndarray,
+                   machine: MachineConfig) -> Plan:
+    """Plan with the whole-program trapezoidal look-ahead (see the module docstring)."""
+    n = len(spans)
+    m = bucket_size(n)
+    args = (
+        _pad(spans.kind, m, SpanKind.POINT), _pad(spans.length, m, 0.0), _pad(spans.radius, m, np.inf),
+        _pad(spans.tangent_in, m, 0.0), _pad(spans.tangent_out, m, 0.0), _pad(span_feed_mm_s, m, 0.0),
+        _pad(span_dwell_s, m, 0.0), _pad(span_stop_before, m, True),
+    )
+    out = plan_arrays(*args, jnp.asarray(axis_v_max), jnp.asarray(axis_a_max), machine.path.chord_tol_mm,
+                      machine.tick_hz)
+    out = jax.device_get(out)
+    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks",
+            "first_tick")
+    arrays = {k: np.asarray(out[k][:n]) for k in keys}
+    for v in arrays.values():
+        v.setflags(write=False)
+    return Plan(length=spans.length, n_ticks=int(out["n_ticks"]), tick_hz=machine.tick_hz, **arrays)
