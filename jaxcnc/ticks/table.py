@@ -1,0 +1,96 @@
+"""From a planned job to a table file: sampled, quantised, streamed to disk with its events.
+
+The table is written chunk by chunk (a long job never holds all its ticks in memory). Events:
+one ``BLOCK`` per program block at its first tick, ``LASER`` where the beam's power changes
+(rapids are dark), and the machine events (dwell, stops, tool change, end) at their ticks.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+import jaxcnc
+from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter
+from jaxcnc.planners.job import PlannedJob
+from jaxcnc.program import Event, Kind, LaserMode
+from jaxcnc.ticks.sample import TickSampler, quantize
+
+_EVENT_OF = {Event.PROGRAM_STOP: EventKind.PROGRAM_STOP, Event.OPTIONAL_STOP: EventKind.OPTIONAL_STOP,
+             Event.TOOL_CHANGE: EventKind.TOOL_CHANGE, Event.PROGRAM_END: EventKind.PROGRAM_END}
+
+
+def job_events(job: PlannedJob) -> np.ndarray:
+    """The event records of a job, sorted by tick (``EVENT_DTYPE``)."""
+    prog, spans, plan = job.program, job.spans, job.plan
+    rows = spans.block
+    tick = plan.first_tick
+    first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
+    parts = []
+
+    order = []  # program order of each event, to sort events of one tick as the program wrote them
+
+    def add(ticks, kind, aux=0, value=0.0, seg=None):
+        e = np.zeros(np.size(ticks), EVENT_DTYPE)
+        e["tick"], e["kind"], e["aux"], e["value"] = ticks, kind, aux, value
+        parts.append(e)
+        order.append(np.broadcast_to(len(rows) if seg is None else seg, e.shape) * 8 + kind)
+
+    b = np.flatnonzero(first_of_block)
+    add(tick[b], EventKind.BLOCK, prog.line[rows[b]], rows[b], seg=b)
+    # Laser: the beam burns on feed moves and dwells while M3/M4 is on; rapids and events are dark.
+    kind = prog.kind[rows]
+    lit = (prog.laser[rows] != LaserMode.OFF) & ~prog.rapid[rows] & ((kind == Kind.LINE) | (kind == Kind.ARC) |
+                                                                     (kind == Kind.DWELL))
+    power = np.where(lit, prog.power[rows], 0.0)
+    mode = np.where(lit, prog.laser[rows], 0)
+    changed = np.flatnonzero(np.diff(np.concatenate([[0.0], power])) != 0)
+    add(tick[changed], EventKind.LASER, mode[changed], power[changed], seg=changed)
+    if power.size and power[-1] != 0:
+        add(np.int64(plan.n_ticks), EventKind.LASER, 0, 0.0)
+    dw = np.flatnonzero((kind == Kind.DWELL) & first_of_block)
+    add(tick[dw], EventKind.DWELL, 0, prog.dwell_s[rows[dw]], seg=dw)
+    ev = np.flatnonzero((kind == Kind.EVENT) & (spans.kind == SpanKind.POINT))
+    for code, ek in _EVENT_OF.items():
+        sel = ev[prog.event[rows[ev]] == code]
+        add(tick[sel], ek, prog.event_value[rows[sel]], 0.0, seg=sel)
+    out = np.concatenate(parts)
+    return out[np.lexsort((np.concatenate(order), out["tick"]))]
+
+
+def _sha256(path: str) -> str | None:
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = "lookahead"
+                ) -> Path:
+    """Sample ``job`` at its tick rate and write the table file at ``path``.
+
+    ``progress``: show a progress bar (``None``: only on a terminal).
+    """
+    m = job.machine
+    sampler = TickSampler(job)
+    meta = {
+        "machine": m.name, "machine_file": m.source, "machine_sha256": _sha256(m.source),
+        "source": job.program.file, "source_sha256": _sha256(job.program.file),
+        "generator": f"jaxcnc {jaxcnc.__version__}", "planner": planner,
+        "total_time_s": job.plan.total_time_s, "n_blocks": job.program.n_blocks,
+    }
+    with TableWriter(path, axes=list(m.axis_names), tick_hz=m.tick_hz, discrete_mm=m.discrete_mm,
+                     n_rows=sampler.n_rows, meta=meta) as w:
+        bar = tqdm(total=sampler.n_rows, unit="tick", unit_scale=True, desc="ticks", disable=progress is False
+                   if progress is not None else None, leave=False)
+        for _first, p in sampler:
+            pos, fine = quantize(p, m.discrete_mm)
+            w.write(np.asarray(pos), np.asarray(fine))
+            bar.update(p.shape[0])
+        bar.close()
+        w.events = job_events(job)
+    return Path(path)

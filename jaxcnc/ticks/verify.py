@@ -1,0 +1,159 @@
+"""Independent verification of a tick table against a machine's limits (NumPy only).
+
+Speed, acceleration and jerk are measured at the tick rate by finite differences of the
+*unquantised* positions (integer discretes plus the fine residual). Differences are taken in
+exact int64 arithmetic on the 2^-32-discrete fixed-point values, then scaled, so the
+measurement noise is ~1e-13 mm per tick. The machine is taken to stand still before the first
+row and after the last, so a table that starts or ends moving fails. Nothing here reads the
+plan: the table and the machine file are the only inputs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from jaxcnc.hw.tablefile import FINE_SCALE, TableFile
+from jaxcnc.machine import MachineConfig
+
+#: Relative slack for floating-point rounding when comparing with a limit.
+REL_SLACK = 1e-9
+_QUANTITIES = ("v", "a", "j")
+_UNITS = {"v": "mm/s", "a": "mm/s^2", "j": "mm/s^3", "pos": "mm"}
+
+
+@dataclass(frozen=True)
+class Violation:
+    """A run of consecutive ticks where one quantity of one axis exceeds its limit."""
+
+    first_tick: int
+    last_tick: int
+    axis: str
+    quantity: str  # "v", "a", "j", "pos", or "table"
+    value: float  # the worst value in the run
+    limit: float
+
+    def __str__(self) -> str:
+        if self.quantity == "table":
+            return f"table: {self.axis}"
+        span = f"tick {self.first_tick}" + (f" (to {self.last_tick})" if self.last_tick != self.first_tick else "")
+        name = {"v": "|v|", "a": "|a|", "j": "|j|", "pos": "position"}[self.quantity]
+        rel = ">" if self.quantity != "pos" or self.value > self.limit else "<"
+        return (f"{span} axis {self.axis}: {name} = {self.value:.6g} {_UNITS[self.quantity]} {rel} limit "
+                f"{self.limit:.6g}")
+
+
+@dataclass
+class Measurement:
+    """Per-axis maxima measured on a table, and the limit violations found."""
+
+    axes: list[str]
+    max_abs_v: dict[str, float] = field(default_factory=dict)
+    max_abs_a: dict[str, float] = field(default_factory=dict)
+    max_abs_j: dict[str, float] = field(default_factory=dict)
+    min_pos: dict[str, float] = field(default_factory=dict)
+    max_pos: dict[str, float] = field(default_factory=dict)
+    violations: list[Violation] = field(default_factory=list)
+    n_rows: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.violations
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Inclusive index ranges of the True runs of a 1-D mask."""
+    if not mask.any():
+        return []
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+
+
+def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 20) -> Measurement:
+    """Measure a table's per-axis |v|, |a|, |j| and travel; check them against ``machine``.
+
+    Differences at row ``k`` use rows ``k-3..k`` (jerk), ``k-2..k`` (acceleration) and
+    ``k-1..k`` (speed), with the first row repeated before the table and the last row after it.
+    """
+    h = table.header
+    axes = h.axes
+    meas = Measurement(axes=axes, n_rows=h.n_rows)
+    f, q = h.tick_hz, h.discrete_mm
+    limits = {}
+    if machine is not None:
+        if not h.has_fine:
+            meas.violations.append(Violation(0, 0, "no fine channel: speed and acceleration cannot be verified at "
+                                             "the tick rate", "table", 0, 0))
+        if abs(h.tick_hz - machine.tick_hz) > 1e-9 * machine.tick_hz:
+            meas.violations.append(Violation(0, 0, f"tick rate {h.tick_hz:g} Hz differs from the machine's "
+                                             f"{machine.tick_hz:g} Hz", "table", 0, 0))
+        if abs(h.discrete_mm - machine.discrete_mm) > 1e-12:
+            meas.violations.append(Violation(0, 0, f"discrete {h.discrete_mm:g} mm differs from the machine's "
+                                             f"{machine.discrete_mm:g} mm", "table", 0, 0))
+        for a in axes:
+            if a not in machine.axis_names:
+                meas.violations.append(Violation(0, 0, f"axis {a!r} is not on machine {machine.name!r}", "table", 0,
+                                                 0))
+                continue
+            ax = machine.axis(a)
+            limits[a] = {"v": ax.v_max, "a": ax.a_max, "j": ax.j_max}
+        missing = [a for a in machine.axis_names if a not in axes]
+        if missing:
+            meas.violations.append(Violation(0, 0, f"table lacks machine axes {missing}", "table", 0, 0))
+    # Scale from k-th integer difference (in 2^-32 discretes) to mm/s^k.
+    scale = {name: q / FINE_SCALE * f ** (i + 1) for i, name in enumerate(_QUANTITIES)}
+    # Noise of the fine channel's rounding (half a unit per row) in the k-th difference.
+    noise = {name: 2 ** (i + 1) * 0.5 * scale[name] for i, name in enumerate(_QUANTITIES)}
+    maxima = {name: np.zeros(len(axes)) for name in _QUANTITIES}
+    pmin = np.full(len(axes), np.inf)
+    pmax = np.full(len(axes), -np.inf)
+    n = h.n_rows
+    pending: dict[tuple[str, str], list[tuple[int, int, float]]] = {}
+    for start in range(0, n + 3, chunk_rows):
+        # rows start-3 .. stop-1 of the table extended by 3 copies of its first and last rows
+        stop = min(start + chunk_rows, n + 3)
+        idx = np.clip(np.arange(start - 3, stop), 0, n - 1)
+        pos = np.asarray(table.positions[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
+        fine = (np.asarray(table.fine[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
+                if h.has_fine else np.zeros_like(pos))
+        pmin = np.minimum(pmin, pos.min(axis=0) * q)
+        pmax = np.maximum(pmax, pos.max(axis=0) * q)
+        d = np.diff(pos, axis=0) * np.int64(2**32) + np.diff(fine, axis=0)  # exact int64
+        diffs = {"v": d[2:], "a": np.diff(d, axis=0)[1:], "j": np.diff(d, n=2, axis=0)}
+        for name, dd in diffs.items():
+            val = np.abs(dd).astype(np.float64) * scale[name]  # row k = start + i
+            maxima[name] = np.maximum(maxima[name], val.max(axis=0, initial=0.0))
+            for i, a in enumerate(axes):
+                lim = limits.get(a, {}).get(name)
+                if lim is None:
+                    continue
+                bad = val[:, i] > lim * (1 + REL_SLACK) + noise[name]
+                for r0, r1 in _runs(bad):
+                    pending.setdefault((a, name), []).append((start + r0, start + r1,
+                                                              float(val[r0 : r1 + 1, i].max())))
+    for (a, name), runs in pending.items():
+        merged: list[list] = []
+        for r0, r1, v in runs:  # join runs split by chunk boundaries
+            if merged and r0 == merged[-1][1] + 1:
+                merged[-1][1], merged[-1][2] = r1, max(merged[-1][2], v)
+            else:
+                merged.append([r0, r1, v])
+        for r0, r1, v in merged:
+            meas.violations.append(Violation(min(r0, n - 1), min(r1, n - 1), a, name, v, limits[a][name]))
+    if machine is not None:
+        for i, a in enumerate(axes):
+            if a not in machine.axis_names:
+                continue
+            ax = machine.axis(a)
+            if pmin[i] < ax.min - q / 2:
+                meas.violations.append(Violation(int(np.argmin(table.positions[:, i])), 0, a, "pos", pmin[i], ax.min))
+            if pmax[i] > ax.max + q / 2:
+                meas.violations.append(Violation(int(np.argmax(table.positions[:, i])), 0, a, "pos", pmax[i], ax.max))
+    for i, a in enumerate(axes):
+        meas.max_abs_v[a] = float(maxima["v"][i])
+        meas.max_abs_a[a] = float(maxima["a"][i])
+        meas.max_abs_j[a] = float(maxima["j"][i])
+        meas.min_pos[a], meas.max_pos[a] = float(pmin[i]), float(pmax[i])
+    meas.violations.sort(key=lambda v: (v.first_tick, v.axis, v.quantity))
+    return meas
