@@ -1,0 +1,5 @@
+import sys
+
+from jaxcnc.cli.main import main
+
+sys.exit(main())
