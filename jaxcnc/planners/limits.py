@@ -4,9 +4,11 @@ Everything is a batched JAX function of span arrays; speeds are handled as ``x =
 
 Acceleration budget. The table is verified at the tick rate by second differences of positions,
 so a velocity step ``Δv`` at a junction (a kink the path passes without stopping) reads as an
-acceleration ``Δv / dt`` there. Each axis' ``a_max`` is therefore split: ``(1 - JUNCTION_SHARE)``
-for smooth motion (tangential plus centripetal) and ``JUNCTION_SHARE`` for junction steps, which
-bounds every second difference by ``a_max``.
+acceleration ``Δv / dt`` there, on top of the smooth acceleration around it. On spans that touch
+such a kink each axis' ``a_max`` is therefore split: ``(1 - JUNCTION_SHARE)`` for smooth motion
+(tangential plus centripetal) and ``JUNCTION_SHARE`` for the step, which bounds every second
+difference by ``a_max``. Spans between exact stops or exactly tangent junctions keep all of
+``a_max``.
 
 Lines. With unit direction ``e``, axis ``i`` moves at ``v·e_i`` and accelerates at ``a_t·e_i``:
 ``v ≤ min_i v_max_i / |e_i|`` and ``a_t ≤ min_i a_i / |e_i|`` (``a_i`` the smooth budget).
@@ -40,7 +42,7 @@ CORNER_ANGLE_RAD = 0.0175  # 1°
 
 def span_caps(kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, tangent: jnp.ndarray,
               feed_mm_s: jnp.ndarray, v_max: jnp.ndarray, a_max: jnp.ndarray, chord_tol_mm: float,
-              tick_hz: float) -> tuple[jnp.ndarray, jnp.ndarray]:
+              tick_hz: float, at_kink: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Speed cap (as v², mm²/s²) and tangential acceleration cap (mm/s²) of each span.
 
     Args:
@@ -48,18 +50,19 @@ def span_caps(kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, tange
         tangent: ``(n, 3)`` unit tangent of lines (any unit vector for arcs).
         feed_mm_s: ``(n,)`` programmed speed (feed or rapid cap) of each span.
         v_max, a_max: ``(3,)`` axis limits for x, y, z (``inf`` where the machine lacks the axis).
+        at_kink: ``(n,)`` bool, the span starts or ends at a junction passed with a velocity step.
     Returns:
         ``(x_cap, a_t)``, both ``(n,)``. Point spans get ``x_cap = 0``.
     """
-    a_smooth = (1.0 - JUNCTION_SHARE) * a_max
+    a_smooth = jnp.where(at_kink, 1.0 - JUNCTION_SHARE, 1.0)[:, None] * a_max[None, :]
     comp = jnp.abs(tangent)
     inv = jnp.where(comp > 0, 1.0 / jnp.where(comp > 0, comp, 1.0), jnp.inf)
     v_line = jnp.min(v_max[None, :] * inv, axis=1)
-    a_line = jnp.min(a_smooth[None, :] * inv, axis=1)
+    a_line = jnp.min(a_smooth * inv, axis=1)
 
     is_arc = kind == SpanKind.ARC
     r = jnp.where(is_arc, radius, 1.0)
-    a_plane = jnp.minimum(a_smooth[0], a_smooth[1])
+    a_plane = jnp.minimum(a_smooth[:, 0], a_smooth[:, 1])
     v_arc = jnp.minimum(v_max[0], v_max[1])
     x_centripetal = ARC_NORMAL_SHARE * a_plane * r
     cos_half = jnp.clip(1.0 - chord_tol_mm / r, -1.0, 1.0)
@@ -73,6 +76,12 @@ def span_caps(kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, tange
     a_t = jnp.where(is_arc, a_arc, a_line)
     is_point = kind == SpanKind.POINT
     return jnp.where(is_point, 0.0, x_cap), jnp.where(is_point, jnp.inf, a_t)
+
+
+def is_corner(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray) -> jnp.ndarray:
+    """``(m,)`` bool: the junction turns by more than ``CORNER_ANGLE_RAD`` (exact stop)."""
+    chord = jnp.linalg.norm(tangent_in - tangent_out_prev, axis=1)
+    return chord > 2.0 * jnp.sin(CORNER_ANGLE_RAD / 2)
 
 
 def junction_caps(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray, a_max: jnp.ndarray,
@@ -89,5 +98,4 @@ def junction_caps(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray, a_max:
     d = jnp.abs(tangent_in - tangent_out_prev)
     budget = JUNCTION_SHARE * a_max / tick_hz  # mm/s of velocity step per axis
     v = jnp.min(jnp.where(d > 0, budget[None, :] / jnp.where(d > 0, d, 1.0), jnp.inf), axis=1)
-    corner = jnp.linalg.norm(tangent_in - tangent_out_prev, axis=1) > 2.0 * jnp.sin(CORNER_ANGLE_RAD / 2)
-    return jnp.where(corner, 0.0, v**2)
+    return jnp.where(is_corner(tangent_out_prev, tangent_in), 0.0, v**2)

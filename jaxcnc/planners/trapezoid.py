@@ -15,7 +15,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.machine import MachineConfig
-from jaxcnc.planners.limits import junction_caps, span_caps
+from jaxcnc.planners.limits import is_corner, junction_caps, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
@@ -36,9 +36,14 @@ def plan_arrays(kind, length, radius, tangent_in, tangent_out, feed, dwell, stop
     Returns the dict of :func:`~jaxcnc.planners.timelaw.align_to_ticks` plus ``x_node`` (v² at
     the ``n+1`` nodes).
     """
-    x_cap, a_t = span_caps(kind, length, radius, tangent_in, feed, v_max, a_max, chord_tol, tick_hz)
-    j_cap = junction_caps(tangent_out[:-1], tangent_in[1:], a_max, tick_hz)
-    j_cap = jnp.where(stop_before[1:], 0.0, j_cap)
+    t_prev, t_next = tangent_out[:-1], tangent_in[1:]
+    stop = stop_before[1:] | is_corner(t_prev, t_next) | (kind[:-1] == SpanKind.POINT) | (kind[1:] == SpanKind.POINT)
+    kink = ~stop & jnp.any(t_prev != t_next, axis=1)  # passed moving, with a velocity step
+    no = jnp.zeros((1,), bool)
+    at_kink = jnp.concatenate([no, kink]) | jnp.concatenate([kink, no])
+    x_cap, a_t = span_caps(kind, length, radius, tangent_in, feed, v_max, a_max, chord_tol, tick_hz, at_kink)
+    j_cap = junction_caps(t_prev, t_next, a_max, tick_hz)
+    j_cap = jnp.where(stop, 0.0, j_cap)
     j_cap = jnp.minimum(j_cap, jnp.minimum(x_cap[:-1], x_cap[1:]))
     zero = jnp.zeros((1,), jnp.float64)
     node_cap = jnp.concatenate([zero, j_cap, zero])
