@@ -69,6 +69,9 @@ def tokenize(raw: str, file: str, line_no: int) -> tuple[list[Word], list[str]]:
             raise SourceError(file, line_no, col, f"unexpected character {shown!r}: expected a word such as G1 or X10")
         letter = c.upper()
         m = _NUMBER.match(text, i + 1)
+        if m is None and i + 1 < n and text[i + 1] in "#[":
+            raise SourceError(file, line_no, cols[i + 1], f"parametric programming ({text[i + 1]!r}) is not "
+                              "supported yet")
         if m is None:
             rest = text[i + 1 : i + 9]
             raise SourceError(file, line_no, col, f"malformed number after {letter!r}: {rest!r}"

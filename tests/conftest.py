@@ -1,0 +1,73 @@
+"""Shared fixtures: machine files written by the tests, the corpus (skipped when absent)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from jaxcnc.machine import MachineConfig, parse_machine
+
+REPO = Path(__file__).resolve().parents[1]
+CORPUS = REPO.parent / "shared" / "corpus"
+EXAMPLE_MACHINE = REPO / "examples" / "machines" / "laser-cutter.toml"
+
+MACHINE_TOML = """\
+[machine]
+name = "test-machine"
+tick_hz = {tick_hz}
+discrete_mm = 0.001
+
+[axes.x]
+v_max = {v:g}
+a_max = {a:g}
+min = -500.0
+max = 500.0
+
+[axes.y]
+v_max = {v:g}
+a_max = {a_y:g}
+min = -500.0
+max = 500.0
+
+[axes.z]
+v_max = 50.0
+a_max = 500.0
+min = -100.0
+max = 100.0
+
+[path]
+feed = 50.0
+rapid = {rapid:g}
+chord_tol_mm = 0.001
+"""
+
+
+def machine_text(tick_hz: float = 10000, v: float = 100.0, a: float = 1000.0, a_y: float | None = None,
+                 rapid: float = 100.0) -> str:
+    return MACHINE_TOML.format(tick_hz=tick_hz, v=v, a=a, a_y=a if a_y is None else a_y, rapid=rapid)
+
+
+def make_machine(**kw) -> MachineConfig:
+    return parse_machine(machine_text(**kw), "test-machine.toml")
+
+
+@pytest.fixture
+def machine() -> MachineConfig:
+    return make_machine()
+
+
+@pytest.fixture
+def machine_file(tmp_path: Path) -> Path:
+    p = tmp_path / "machine.toml"
+    p.write_text(machine_text())
+    return p
+
+
+def corpus_file(name: str) -> Path:
+    """A corpus G-code file by a distinctive part of its name; skips the test when absent."""
+    folder = CORPUS / "gcode"
+    hits = sorted(folder.glob(f"*{name}*")) if folder.is_dir() else []
+    if not hits:
+        pytest.skip(f"corpus file *{name}* not available (../shared/corpus is absent)")
+    return hits[0]
