@@ -118,7 +118,7 @@ def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     phi = (sweep / n_pieces)[idx]  # piece sweep
     tn, rr, cc = turn[idx], r[idx], c[idx]
     a0 = th_s[idx] + tn * j * phi
-    a1 = a0 + tn * phi
+    a1 = th_s[idx] + tn * (j + 1) * phi  # the same expression as the next piece's a0: joints agree exactly
     am = a0 + tn * phi / 2
 
     def on_circle(angle: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
