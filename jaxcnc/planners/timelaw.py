@@ -130,7 +130,7 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
         out[key] = prof[key] / lam_k**2
     dur = dur_ticks * lam_k
     g_start = jnp.cumsum(g_whole) - g_whole
-    offset = _segmented_cumsum(dur, rest_start) - dur
+    offset = jnp.where(rest_start, 0.0, _segmented_cumsum(dur, rest_start) - dur)  # exclusive, exact 0 at starts
     out["group_tick"] = g_start[group]
     out["offset_ticks"] = offset
     out["first_tick"] = out["group_tick"] + jnp.ceil(offset).astype(jnp.int64)
