@@ -36,6 +36,9 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.spans import SpanKind
 
 JUNCTION_SHARE = 0.05
+#: Relative margin below every limit, so that values measured on the table — whose positions
+#: carry a resolution of 2^-32 discrete — read below the limit rather than on it.
+NUMERIC_MARGIN = 1e-5
 ARC_NORMAL_SHARE = 2**-0.5
 CORNER_ANGLE_RAD = 0.0175  # 1°
 

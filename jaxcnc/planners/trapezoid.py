@@ -15,7 +15,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.machine import MachineConfig
-from jaxcnc.planners.limits import is_corner, junction_caps, span_caps
+from jaxcnc.planners.limits import NUMERIC_MARGIN, is_corner, junction_caps, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
@@ -72,8 +72,9 @@ def plan_lookahead(spans: Spans, span_feed_mm_s: np.ndarray, span_dwell_s: np.nd
         _pad(spans.tangent_in, m, 0.0), _pad(spans.tangent_out, m, 0.0), _pad(span_feed_mm_s, m, 0.0),
         _pad(span_dwell_s, m, 0.0), _pad(span_stop_before, m, True),
     )
-    out = plan_arrays(*args, jnp.asarray(axis_v_max), jnp.asarray(axis_a_max), machine.path.chord_tol_mm,
-                      machine.tick_hz)
+    keep = 1.0 - NUMERIC_MARGIN
+    out = plan_arrays(*args, jnp.asarray(axis_v_max) * keep, jnp.asarray(axis_a_max) * keep,
+                      machine.path.chord_tol_mm, machine.tick_hz)
     out = jax.device_get(out)
     keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks",
             "first_tick")
