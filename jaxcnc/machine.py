@@ -260,8 +260,13 @@ class _Loader:
             "number_list": isinstance(v, list) and all(is_num(x) for x in v),
         }[typ]
         if not ok:
-            want = {"number": "a number", "string": "a string", "bool": "true or false",
-                    "string_list": "a list of strings", "number_list": "a list of numbers"}[typ]
+            want = {
+                "number": "a number",
+                "string": "a string",
+                "bool": "true or false",
+                "string_list": "a list of strings",
+                "number_list": "a list of numbers",
+            }[typ]
             raise self.fail(table, key, f"expected {want}, got {v!r} ({type(v).__name__})")
         if typ == "number":
             return float(v)
@@ -289,8 +294,12 @@ class _Loader:
                 raise self.fail(f"axes.{name}", None, f"unknown axis {name!r}; axes are {', '.join(AXIS_NAMES)}")
         for name in REQUIRED_AXES:
             if name not in axes_raw:
-                raise MachineFileError(self.file, f"axes.{name}", f"missing axis {name!r}: a [axes.{name}] table "
-                                       "is required", self.line_of("axes"))
+                raise MachineFileError(
+                    self.file,
+                    f"axes.{name}",
+                    f"missing axis {name!r}: a [axes.{name}] table is required",
+                    self.line_of("axes"),
+                )
         axes = []
         for name in (n for n in AXIS_NAMES if n in axes_raw):
             a = self.section(f"axes.{name}", axes_raw[name], "axis")
@@ -302,8 +311,11 @@ class _Loader:
                 raise self.fail(f"axes.{name}", "home", f"home {a['home']:g} is outside [{a['min']:g}, {a['max']:g}]")
             reach = max(abs(a["min"]), abs(a["max"])) / m["discrete_mm"]
             if reach > _INT32_MAX:
-                raise self.fail("machine", "discrete_mm", f"axis {name} travel {reach:.3g} discretes exceeds int32; "
-                                "use a coarser discrete")
+                raise self.fail(
+                    "machine",
+                    "discrete_mm",
+                    f"axis {name} travel {reach:.3g} discretes exceeds int32; use a coarser discrete",
+                )
             axes.append(AxisConfig(name=name, **a))
         if laser["mode"] == "pulsed" and laser["pulse_hz"] is None:
             raise self.fail("laser", None, "mode 'pulsed' needs pulse_hz")
@@ -319,8 +331,14 @@ class _Loader:
                 raise self.fail("scanner", "field_mm", "needs one positive field size per scanner axis")
             scanner = ScannerConfig(axes=sc["axes"], field_mm=sc["field_mm"])
         return MachineConfig(
-            name=m["name"], tick_hz=m["tick_hz"], discrete_mm=m["discrete_mm"], axes=tuple(axes),
-            path=PathConfig(**path), laser=LaserConfig(**laser), scanner=scanner, source=self.file,
+            name=m["name"],
+            tick_hz=m["tick_hz"],
+            discrete_mm=m["discrete_mm"],
+            axes=tuple(axes),
+            path=PathConfig(**path),
+            laser=LaserConfig(**laser),
+            scanner=scanner,
+            source=self.file,
         )
 
 

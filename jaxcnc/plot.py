@@ -46,7 +46,7 @@ def lit_mask(table: TableFile) -> np.ndarray:
     mask = np.zeros(table.n_rows, bool)
     ev = table.events[table.events["kind"] == EventKind.LASER]
     on_since = None
-    for tick, value in zip(ev["tick"], ev["value"]):
+    for tick, value in zip(ev["tick"], ev["value"], strict=False):
         if value > 0 and on_since is None:
             on_since = int(tick)
         elif value == 0 and on_since is not None:
@@ -57,8 +57,9 @@ def lit_mask(table: TableFile) -> np.ndarray:
     return mask
 
 
-def plot_table(table: TableFile, out: str | Path, machine: MachineConfig | None = None, title: str | None = None
-               ) -> Path:
+def plot_table(
+    table: TableFile, out: str | Path, machine: MachineConfig | None = None, title: str | None = None
+) -> Path:
     """Write a PNG: XY path coloured by speed (rapids dashed grey) and v/a/j per axis."""
     h = table.header
     p = table.exact_mm()
@@ -96,8 +97,9 @@ def plot_table(table: TableFile, out: str | Path, machine: MachineConfig | None 
             ax.fill_between(tt, lo, hi, color=c, alpha=0.35, lw=0)
             ax.plot(tt, (lo + hi) / 2 if tt.size < data.shape[0] else lo, color=c, lw=0.6, label=axis)
             if machine is not None and axis in machine.axis_names:
-                lim = {"v": machine.axis(axis).v_max, "a": machine.axis(axis).a_max,
-                       "j": machine.axis(axis).j_max}[name]
+                lim = {"v": machine.axis(axis).v_max, "a": machine.axis(axis).a_max, "j": machine.axis(axis).j_max}[
+                    name
+                ]
                 if lim is not None and name != "j":
                     ax.axhline(lim, color=c, ls=":", lw=0.8)
                     ax.axhline(-lim, color=c, ls=":", lw=0.8)

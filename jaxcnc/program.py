@@ -104,14 +104,37 @@ class Program:
 
 # Column dtypes; ``from_columns`` fills defaults for what a front end leaves out.
 _DTYPES = {
-    "kind": np.int8, "start": np.float64, "end": np.float64, "center": np.float64, "turn": np.int8,
-    "plane": np.int8, "feed": np.float64, "rapid": np.bool_, "laser": np.int8, "power": np.float64,
-    "dwell_s": np.float64, "stop_before": np.bool_, "blend_tol": np.float64, "event": np.int8,
-    "event_value": np.int32, "line": np.int32,
+    "kind": np.int8,
+    "start": np.float64,
+    "end": np.float64,
+    "center": np.float64,
+    "turn": np.int8,
+    "plane": np.int8,
+    "feed": np.float64,
+    "rapid": np.bool_,
+    "laser": np.int8,
+    "power": np.float64,
+    "dwell_s": np.float64,
+    "stop_before": np.bool_,
+    "blend_tol": np.float64,
+    "event": np.int8,
+    "event_value": np.int32,
+    "line": np.int32,
 }
 _DEFAULTS = {
-    "center": np.nan, "turn": 0, "plane": 17, "feed": np.nan, "rapid": False, "laser": 0, "power": 0.0,
-    "dwell_s": 0.0, "stop_before": False, "blend_tol": 0.0, "event": 0, "event_value": 0, "line": 0,
+    "center": np.nan,
+    "turn": 0,
+    "plane": 17,
+    "feed": np.nan,
+    "rapid": False,
+    "laser": 0,
+    "power": 0.0,
+    "dwell_s": 0.0,
+    "stop_before": False,
+    "blend_tol": 0.0,
+    "event": 0,
+    "event_value": 0,
+    "line": 0,
 }
 
 

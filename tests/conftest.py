@@ -43,8 +43,9 @@ chord_tol_mm = 0.001
 """
 
 
-def machine_text(tick_hz: float = 10000, v: float = 100.0, a: float = 1000.0, a_y: float | None = None,
-                 rapid: float = 100.0) -> str:
+def machine_text(
+    tick_hz: float = 10000, v: float = 100.0, a: float = 1000.0, a_y: float | None = None, rapid: float = 100.0
+) -> str:
     return MACHINE_TOML.format(tick_hz=tick_hz, v=v, a=a, a_y=a if a_y is None else a_y, rapid=rapid)
 
 

@@ -17,8 +17,9 @@ def plan_text(text: str, machine: MachineConfig) -> PlannedJob:
     return plan_job(parse_gcode(text, "test.ngc", start=start, home=start), machine)
 
 
-def table_of(text: str, machine: MachineConfig, folder: Path, name: str = "t.ticks"
-             ) -> tuple[PlannedJob, TableFile, Measurement]:
+def table_of(
+    text: str, machine: MachineConfig, folder: Path, name: str = "t.ticks"
+) -> tuple[PlannedJob, TableFile, Measurement]:
     job = plan_text(text, machine)
     path = write_table(job, folder / name, progress=False)
     table = TableFile(path)

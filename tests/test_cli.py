@@ -13,8 +13,17 @@ from jaxcnc.cli.main import main
 from jaxcnc.hw.tablefile import TableFile
 from tests.conftest import EXAMPLE_MACHINE, corpus_file, machine_text
 
-REPORT_KEYS = {"total_time_s", "n_blocks", "n_ticks", "tick_hz", "path_length_mm", "plan_wall_s", "max_abs_v",
-               "max_abs_a", "max_abs_j"}
+REPORT_KEYS = {
+    "total_time_s",
+    "n_blocks",
+    "n_ticks",
+    "tick_hz",
+    "path_length_mm",
+    "plan_wall_s",
+    "max_abs_v",
+    "max_abs_a",
+    "max_abs_j",
+}
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +33,9 @@ def planned_corpus(tmp_path_factory):
     for name in ("51MeanderAve", "plasmatest"):
         src = corpus_file(name)
         table, report = folder / f"{name}.ticks", folder / f"{name}.json"
-        rc = main(["plan", str(src), "--machine", str(EXAMPLE_MACHINE), "-o", str(table), "--report", str(report),
-                   "--quiet"])
+        rc = main(
+            ["plan", str(src), "--machine", str(EXAMPLE_MACHINE), "-o", str(table), "--report", str(report), "--quiet"]
+        )
         out[name] = (rc, table, json.loads(report.read_text()))
     return out
 
@@ -50,8 +60,11 @@ def test_plan_then_check_corpus(planned_corpus, name, capsys):
 def test_check_fails_against_tighter_machine(planned_corpus, tmp_path, capsys):
     _, table, report = planned_corpus["plasmatest"]
     tight = tmp_path / "tight.toml"
-    tight.write_text(EXAMPLE_MACHINE.read_text().replace("a_max = 3000.0", "a_max = 2000.0")
-                     .replace("v_max = 250.0\na_max = 4000.0", "v_max = 200.0\na_max = 4000.0"))
+    tight.write_text(
+        EXAMPLE_MACHINE.read_text()
+        .replace("a_max = 3000.0", "a_max = 2000.0")
+        .replace("v_max = 250.0\na_max = 4000.0", "v_max = 200.0\na_max = 4000.0")
+    )
     capsys.readouterr()
     assert main(["check", str(table), "--machine", str(tight), "--max-lines", "0"]) == 1
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln]
@@ -112,8 +125,7 @@ def test_demo_runs_in_a_fresh_folder(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "check: OK" in r.stdout
     folder = tmp_path / "jaxcnc-demo"
-    for name in ("demo-bracket.ngc", "demo-machine.toml", "demo-bracket.ticks", "demo-bracket.png",
-                 "demo-report.json"):
+    for name in ("demo-bracket.ngc", "demo-machine.toml", "demo-bracket.ticks", "demo-bracket.png", "demo-report.json"):
         assert (folder / name).stat().st_size > 0
 
 
@@ -125,11 +137,14 @@ def test_help(cmd, capsys):
     assert "usage: jaxcnc " + cmd in capsys.readouterr().out
 
 
-@pytest.mark.parametrize(("program", "needle"), [
-    ("G1 X10 F600\nG1 X1.2.3\n", "prog.ngc:2:4: malformed number"),
-    ("G1 X10 F600\nG1 X2000\n", "prog.ngc:2: X reaches 2000 mm, outside the travel"),
-    ("G1 X10 F600\nG1 Z5\n", "prog.ngc:2: the program moves axis Z"),
-])
+@pytest.mark.parametrize(
+    ("program", "needle"),
+    [
+        ("G1 X10 F600\nG1 X1.2.3\n", "prog.ngc:2:4: malformed number"),
+        ("G1 X10 F600\nG1 X2000\n", "prog.ngc:2: X reaches 2000 mm, outside the travel"),
+        ("G1 X10 F600\nG1 Z5\n", "prog.ngc:2: the program moves axis Z"),
+    ],
+)
 def test_bad_program_exits_2_with_location_and_no_table(tmp_path, program, needle):
     prog = tmp_path / "prog.ngc"
     prog.write_text(program)

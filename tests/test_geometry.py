@@ -36,16 +36,24 @@ def test_arcs_split_at_90_degrees_with_exact_lengths():
 
 
 @settings(max_examples=60, deadline=None)
-@given(r=st.floats(0.01, 500), a0=st.floats(-np.pi, np.pi), sweep=st.floats(0.01, 2 * np.pi - 0.01),
-       cw=st.booleans(), cx=st.floats(-100, 100), cy=st.floats(-100, 100))
+@given(
+    r=st.floats(0.01, 500),
+    a0=st.floats(-np.pi, np.pi),
+    sweep=st.floats(0.01, 2 * np.pi - 0.01),
+    cw=st.booleans(),
+    cx=st.floats(-100, 100),
+    cy=st.floats(-100, 100),
+)
 def test_arc_points_lie_on_circle_at_exact_arc_length(r, a0, sweep, cw, cx, cy):
     sgn = -1 if cw else 1
     s0 = (cx + r * np.cos(a0), cy + r * np.sin(a0))
     a1 = a0 + sgn * sweep
     e = (cx + r * np.cos(a1), cy + r * np.sin(a1))
     s0 = np.round(s0, 12)
-    text = (f"G0 X{s0[0]:.12f} Y{s0[1]:.12f}\n{'G2' if cw else 'G3'} X{e[0]:.12f} Y{e[1]:.12f} "
-            f"I{cx - s0[0]:.12f} J{cy - s0[1]:.12f} F60\n")
+    text = (
+        f"G0 X{s0[0]:.12f} Y{s0[1]:.12f}\n{'G2' if cw else 'G3'} X{e[0]:.12f} Y{e[1]:.12f} "
+        f"I{cx - s0[0]:.12f} J{cy - s0[1]:.12f} F60\n"
+    )
     sp = spans_of(text)
     arcs = np.flatnonzero(sp.kind == SpanKind.ARC)
     total = sp.length[arcs].sum()

@@ -56,14 +56,14 @@ def _line_of(text: str, needle: str) -> int:
         ("tick_hz = 10000", "tick_hz = 10000\nspeed = 3", "machine.speed", "unknown key"),
         ("a_max = 1000", "a_max = 0", "axes.x.a_max", "positive"),
         ("a_max = 1000", "a_max = -5", "axes.x.a_max", "positive"),
-        ("v_max = 100", "v_max = \"fast\"", "axes.x.v_max", "expected a number"),
+        ("v_max = 100", 'v_max = "fast"', "axes.x.v_max", "expected a number"),
         ("v_max = 100", "v_max = true", "axes.x.v_max", "expected a number"),
         ("min = -500.0", "min = 600.0", "axes.x.min", "must be below max"),
         ("v_max = 100", "v_max = 6000000", "axes.x.v_max", "mm/min"),
         ("discrete_mm = 0.001", "discrete_mm = 1", "machine.discrete_mm", "did you mean"),
         ("chord_tol_mm = 0.001", "chord_tol_mm = -0.001", "path.chord_tol_mm", "positive"),
         ("rapid = 100", "rapid = 0", "path.rapid", "positive"),
-        ("[path]", "[path]\ncorner_tol_mm = \"none\"", "path.corner_tol_mm", "expected a number"),
+        ("[path]", '[path]\ncorner_tol_mm = "none"', "path.corner_tol_mm", "expected a number"),
     ],
 )
 def test_each_mistake_is_named(old, new, key, reason):
@@ -104,16 +104,16 @@ def test_missing_required_key_and_table():
 def test_home_outside_travel_and_laser_modes():
     e = _err(machine_text().replace("min = -100.0", "min = -100.0\nhome = 200.0"))
     assert e.key == "axes.z.home"
-    e = _err(machine_text() + "\n[laser]\nmode = \"pulsed\"\n")
+    e = _err(machine_text() + '\n[laser]\nmode = "pulsed"\n')
     assert e.key == "laser" and "pulse_hz" in e.reason
-    e = _err(machine_text() + "\n[laser]\nmode = \"plasma\"\n")
+    e = _err(machine_text() + '\n[laser]\nmode = "plasma"\n')
     assert e.key == "laser.mode"
     e = _err(machine_text() + "\n[laser]\ntolerance = 1.0\n")
     assert e.key == "laser.tolerance"
 
 
 def test_scanner_section():
-    text = machine_text() + "\n[scanner]\naxes = [\"u\", \"v\"]\nfield_mm = [50.0, 50.0]\n"
+    text = machine_text() + '\n[scanner]\naxes = ["u", "v"]\nfield_mm = [50.0, 50.0]\n'
     e = _err(text)
     assert e.key == "scanner.axes" and "'u'" in e.reason
 
@@ -135,8 +135,11 @@ def test_cli_reports_machine_mistake_without_traceback(tmp_path):
     bad.write_text(machine_text().replace("a_max = 1000", "a_max = -1", 1))
     prog = tmp_path / "p.ngc"
     prog.write_text("G1 X1 F100\n")
-    r = subprocess.run([sys.executable, "-m", "jaxcnc", "plan", str(prog), "-m", str(bad), "-o",
-                        str(tmp_path / "o.ticks")], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "jaxcnc", "plan", str(prog), "-m", str(bad), "-o", str(tmp_path / "o.ticks")],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
     assert f"{bad}:" in r.stderr and "[axes.x.a_max]" in r.stderr

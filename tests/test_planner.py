@@ -45,12 +45,15 @@ def test_registry_has_lookahead():
     assert "lookahead" in planner_names()
 
 
-@pytest.mark.parametrize(("length", "feed", "a"), [
-    (100.0, 50.0, 1000.0),  # trapezoid
-    (1.0, 50.0, 1000.0),  # triangle: the feed is never reached
-    (37.3, 99.0, 250.0),
-    (0.05, 10.0, 3000.0),
-])
+@pytest.mark.parametrize(
+    ("length", "feed", "a"),
+    [
+        (100.0, 50.0, 1000.0),  # trapezoid
+        (1.0, 50.0, 1000.0),  # triangle: the feed is never reached
+        (37.3, 99.0, 250.0),
+        (0.05, 10.0, 3000.0),
+    ],
+)
 def test_line_rest_to_rest_takes_analytic_time(tmp_path, length, feed, a):
     m = make_machine(a=a)
     job = plan_text(f"G1 X{length} F{feed * 60}\n", m)
@@ -126,14 +129,18 @@ def test_corners_stop_tangent_junctions_do_not(tmp_path):
     assert v_at_node[-2] > 40  # tangent arc -> line
 
 
-_STEP = st.tuples(st.sampled_from(["G1", "G2", "G3", "G0"]), st.floats(-40, 40), st.floats(-40, 40),
-                  st.floats(5, 200))
+_STEP = st.tuples(st.sampled_from(["G1", "G2", "G3", "G0"]), st.floats(-40, 40), st.floats(-40, 40), st.floats(5, 200))
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                 HealthCheck.function_scoped_fixture])
-@given(steps=st.lists(_STEP, min_size=1, max_size=12), a=st.floats(100, 5000), v=st.floats(10, 300),
-       tick_hz=st.sampled_from([1000, 4000, 10000]))
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+)
+@given(
+    steps=st.lists(_STEP, min_size=1, max_size=12),
+    a=st.floats(100, 5000),
+    v=st.floats(10, 300),
+    tick_hz=st.sampled_from([1000, 4000, 10000]),
+)
 def test_random_programs_hold_every_limit_at_every_tick(tmp_path, steps, a, v, tick_hz):
     m = make_machine(tick_hz=tick_hz, v=v, a=a, a_y=a * 1.3, rapid=v)
     lines, pos = [], (0.0, 0.0)

@@ -10,8 +10,15 @@ from jaxcnc.hw.tablefile import EVENT_DTYPE, FINE_SCALE, TableFile, TableWriter
 
 
 def _write(path, pos, fine, events=None, block_rows=64, chunks=(7, 100, 1)):
-    with TableWriter(path, axes=["x", "y", "z"], tick_hz=1000.0, discrete_mm=0.001, n_rows=pos.shape[0],
-                     meta={"machine": "m"}, block_rows=block_rows) as w:
+    with TableWriter(
+        path,
+        axes=["x", "y", "z"],
+        tick_hz=1000.0,
+        discrete_mm=0.001,
+        n_rows=pos.shape[0],
+        meta={"machine": "m"},
+        block_rows=block_rows,
+    ) as w:
         i, k = 0, 0
         while i < pos.shape[0]:
             n = chunks[k % len(chunks)]
@@ -88,8 +95,12 @@ def test_damaged_block_is_named(tmp_path, data):
 def test_truncated_extended_and_foreign_files(tmp_path, data):
     pos, fine, ev = data
     good = _write(tmp_path / "a.ticks", pos, fine, ev).read_bytes()
-    for name, blob, needle in [("trunc", good[:-100], "truncated"), ("ext", good + b"\0", "truncated or extended"),
-                               ("foreign", b"G1 X10\n" * 100, "bad magic"), ("empty", b"", "bad magic")]:
+    for name, blob, needle in [
+        ("trunc", good[:-100], "truncated"),
+        ("ext", good + b"\0", "truncated or extended"),
+        ("foreign", b"G1 X10\n" * 100, "bad magic"),
+        ("empty", b"", "bad magic"),
+    ]:
         p = tmp_path / f"{name}.ticks"
         p.write_bytes(blob)
         with pytest.raises(TableFileError, match=needle):
@@ -119,7 +130,9 @@ def test_no_jax_on_the_player_side():
     import subprocess
     import sys
 
-    code = ("import sys; import jaxcnc.hw.tablefile, jaxcnc.hw.player, jaxcnc.hw.sinks, jaxcnc.ticks.verify; "
-            "print('jax' in sys.modules)")
+    code = (
+        "import sys; import jaxcnc.hw.tablefile, jaxcnc.hw.player, jaxcnc.hw.sinks, jaxcnc.ticks.verify; "
+        "print('jax' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

@@ -38,8 +38,9 @@ def _load_program(path: Path, machine):
     return load_gcode(path, start=start, home=start)
 
 
-def plan_file(input_path: Path, machine_path: Path, out: Path, planner: str = "lookahead",
-              progress: bool | None = None) -> dict:
+def plan_file(
+    input_path: Path, machine_path: Path, out: Path, planner: str = "lookahead", progress: bool | None = None
+) -> dict:
     """Plan ``input_path`` on the machine and write the table; return the report dict."""
     from jaxcnc.hw.tablefile import TableFile
     from jaxcnc.machine import load_machine
@@ -58,13 +59,26 @@ def plan_file(input_path: Path, machine_path: Path, out: Path, planner: str = "l
     meas = measure_table(TableFile(out), machine)
     t_check = time.perf_counter()
     report = {
-        "input": str(input_path), "machine": machine.name, "table": str(out), "planner": planner,
-        "total_time_s": job.plan.total_time_s, "n_blocks": program.n_blocks, "n_spans": len(job.spans),
-        "n_ticks": job.plan.n_ticks + 1, "tick_hz": machine.tick_hz, "path_length_mm": job.path_length_mm,
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": planner,
+        "total_time_s": job.plan.total_time_s,
+        "n_blocks": program.n_blocks,
+        "n_spans": len(job.spans),
+        "n_ticks": job.plan.n_ticks + 1,
+        "tick_hz": machine.tick_hz,
+        "path_length_mm": job.path_length_mm,
         "plan_wall_s": t_ticks - t0,
-        "timings_s": {"parse": t_parse - t0, "plan": t_plan - t_parse, "ticks": t_ticks - t_plan,
-                      "verify": t_check - t_ticks},
-        "max_abs_v": meas.max_abs_v, "max_abs_a": meas.max_abs_a, "max_abs_j": meas.max_abs_j,
+        "timings_s": {
+            "parse": t_parse - t0,
+            "plan": t_plan - t_parse,
+            "ticks": t_ticks - t_plan,
+            "verify": t_check - t_ticks,
+        },
+        "max_abs_v": meas.max_abs_v,
+        "max_abs_a": meas.max_abs_a,
+        "max_abs_j": meas.max_abs_j,
         "limits": {a.name: {"v_max": a.v_max, "a_max": a.a_max, "j_max": a.j_max} for a in machine.axes},
         "violations": [str(v) for v in meas.violations],
     }
@@ -72,21 +86,28 @@ def plan_file(input_path: Path, machine_path: Path, out: Path, planner: str = "l
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    report = plan_file(Path(args.input), Path(args.machine), Path(args.output), args.planner,
-                       progress=False if args.quiet else None)
+    report = plan_file(
+        Path(args.input), Path(args.machine), Path(args.output), args.planner, progress=False if args.quiet else None
+    )
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
     if not args.quiet:
-        print(f"planned {report['input']}: {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm, "
-              f"{report['total_time_s']:.3f} s = {report['n_ticks']} ticks at {report['tick_hz']:g} Hz "
-              f"-> {report['table']} ({report['plan_wall_s']:.2f} s)")
-        print(f"  measured on the table: max |v| {_fmt_axes(report['max_abs_v'], 'mm/s')}; "
-              f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}")
+        print(
+            f"planned {report['input']}: {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm, "
+            f"{report['total_time_s']:.3f} s = {report['n_ticks']} ticks at {report['tick_hz']:g} Hz "
+            f"-> {report['table']} ({report['plan_wall_s']:.2f} s)"
+        )
+        print(
+            f"  measured on the table: max |v| {_fmt_axes(report['max_abs_v'], 'mm/s')}; "
+            f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}"
+        )
     if report["violations"]:
         for line in report["violations"][:50]:
             print(f"violation: {line}", file=sys.stderr)
-        print("jaxcnc: error: the planned table breaks the machine limits (a planner bug; please report it)",
-              file=sys.stderr)
+        print(
+            "jaxcnc: error: the planned table breaks the machine limits (a planner bug; please report it)",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -105,8 +126,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     table, meas = check_table(Path(args.table), Path(args.machine))
     h = table.header
     if meas.ok:
-        print(f"OK {args.table}: {h.n_rows} ticks ({(h.n_rows - 1) / h.tick_hz:.3f} s at {h.tick_hz:g} Hz), "
-              f"checksums, travel and limits hold")
+        print(
+            f"OK {args.table}: {h.n_rows} ticks ({(h.n_rows - 1) / h.tick_hz:.3f} s at {h.tick_hz:g} Hz), "
+            f"checksums, travel and limits hold"
+        )
         print(f"  max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}")
         return 0
     shown = meas.violations if args.max_lines <= 0 else meas.violations[: args.max_lines]
@@ -138,9 +161,11 @@ def cmd_play(args: argparse.Namespace) -> int:
     result = play(table, sink, progress=progress)
     bar.close()
     if not args.quiet:
-        print(f"played {args.table} into {args.sink}: {result.executed_tick + 1} ticks executed "
-              f"({result.table_time_s:.3f} s of motion in {result.wall_s:.2f} s, "
-              f"{result.real_time_factor:.1f}x real time)")
+        print(
+            f"played {args.table} into {args.sink}: {result.executed_tick + 1} ticks executed "
+            f"({result.table_time_s:.3f} s of motion in {result.wall_s:.2f} s, "
+            f"{result.real_time_factor:.1f}x real time)"
+        )
         if args.record:
             print(f"  recorded drive positions -> {args.record}")
     return 0 if result.executed_tick + 1 == table.n_rows else 1
@@ -174,12 +199,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
     (out / "demo-report.json").write_text(json.dumps(report, indent=2) + "\n")
     tbl, meas = check_table(table, machine)
     fig = plot_table(tbl, out / "demo-bracket.png", machine=load_machine(machine))
-    print(f"  {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm of path, "
-          f"machining time {report['total_time_s']:.3f} s")
-    print(f"  table: {table} ({report['n_ticks']} ticks at {report['tick_hz']:g} Hz), "
-          f"planned in {report['plan_wall_s']:.2f} s")
-    print(f"  check: {'OK, every tick within the machine limits' if meas.ok else 'FAILED'}; "
-          f"max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}")
+    print(
+        f"  {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm of path, "
+        f"machining time {report['total_time_s']:.3f} s"
+    )
+    print(
+        f"  table: {table} ({report['n_ticks']} ticks at {report['tick_hz']:g} Hz), "
+        f"planned in {report['plan_wall_s']:.2f} s"
+    )
+    print(
+        f"  check: {'OK, every tick within the machine limits' if meas.ok else 'FAILED'}; "
+        f"max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}"
+    )
     print(f"  plot: {fig}")
     print(f"  next: jaxcnc plan YOUR.ngc --machine {machine} -o job.ticks --report job.json")
     return 0 if meas.ok else 1
@@ -201,9 +232,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"jaxcnc {jaxcnc.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    sp = sub.add_parser("plan", help="plan a program into a tick table",
-                        description="Parse INPUT, plan its motion on the machine and write the tick table. "
-                        "INPUT by extension: .ngc .nc .gcode .tap (G-code).")
+    sp = sub.add_parser(
+        "plan",
+        help="plan a program into a tick table",
+        description="Parse INPUT, plan its motion on the machine and write the tick table. "
+        "INPUT by extension: .ngc .nc .gcode .tap (G-code).",
+    )
     sp.add_argument("input", help="the job: a G-code program")
     sp.add_argument("--machine", "-m", required=True, help="machine description (TOML)")
     sp.add_argument("--output", "-o", required=True, help="table file to write (e.g. job.ticks)")
@@ -212,18 +246,24 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
     sp.set_defaults(func=cmd_plan)
 
-    sp = sub.add_parser("check", help="verify a table against a machine's limits",
-                        description="Independently verify a table: checksums, travel, and per-axis speed and "
-                        "acceleration at every tick. Exit 0 only if everything holds; otherwise one line per "
-                        "violation (tick, axis, value, limit).")
+    sp = sub.add_parser(
+        "check",
+        help="verify a table against a machine's limits",
+        description="Independently verify a table: checksums, travel, and per-axis speed and "
+        "acceleration at every tick. Exit 0 only if everything holds; otherwise one line per "
+        "violation (tick, axis, value, limit).",
+    )
     sp.add_argument("table", help="table file")
     sp.add_argument("--machine", "-m", required=True, help="machine description (TOML)")
     sp.add_argument("--max-lines", type=int, default=100, help="print at most this many violations (0: all)")
     sp.set_defaults(func=cmd_check)
 
-    sp = sub.add_parser("play", help="stream a table to a sink",
-                        description="Play a table into a sink, keeping its buffer fed. The table's checksums are "
-                        "verified before anything moves.")
+    sp = sub.add_parser(
+        "play",
+        help="stream a table to a sink",
+        description="Play a table into a sink, keeping its buffer fed. The table's checksums are "
+        "verified before anything moves.",
+    )
     sp.add_argument("table", help="table file")
     sp.add_argument("--sink", default="sim", help="where to play: sim (in-process virtual drives)")
     sp.add_argument("--record", help="sim: save the executed drive positions to this .npy file")
@@ -231,24 +271,33 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--quiet", "-q", action="store_true")
     sp.set_defaults(func=cmd_play)
 
-    sp = sub.add_parser("plot", help="plot a table: path by speed, v/a/j per axis",
-                        description="Write a PNG with the XY path coloured by speed and speed, acceleration and "
-                        "jerk of every axis against time, measured on the table.")
+    sp = sub.add_parser(
+        "plot",
+        help="plot a table: path by speed, v/a/j per axis",
+        description="Write a PNG with the XY path coloured by speed and speed, acceleration and "
+        "jerk of every axis against time, measured on the table.",
+    )
     sp.add_argument("table", help="table file")
     sp.add_argument("--output", "-o", required=True, help="PNG file to write")
     sp.add_argument("--machine", "-m", help="draw this machine's limits")
     sp.set_defaults(func=cmd_plot)
 
-    sp = sub.add_parser("demo", help="plan, check and plot a bundled laser-cutting example",
-                        description="Plan the bundled bracket program on the bundled machine, check the table, "
-                        "write a plot and print a summary. The first thing to run.")
+    sp = sub.add_parser(
+        "demo",
+        help="plan, check and plot a bundled laser-cutting example",
+        description="Plan the bundled bracket program on the bundled machine, check the table, "
+        "write a plot and print a summary. The first thing to run.",
+    )
     sp.add_argument("--out", default="jaxcnc-demo", help="folder for the demo's files (default: %(default)s)")
     sp.set_defaults(func=cmd_demo)
 
-    sp = sub.add_parser("bench", help="benchmarks: planning and tick throughput against baselines",
-                        description="Plan a synthetic program of short line blocks and print blocks/s, ticks/s "
-                        "and ratios against a sequential baseline measured in the same run; JIT compile time "
-                        "is reported apart.")
+    sp = sub.add_parser(
+        "bench",
+        help="benchmarks: planning and tick throughput against baselines",
+        description="Plan a synthetic program of short line blocks and print blocks/s, ticks/s "
+        "and ratios against a sequential baseline measured in the same run; JIT compile time "
+        "is reported apart.",
+    )
     sp.add_argument("--blocks", type=int, default=100_000, help="synthetic program size (default: %(default)s)")
     sp.add_argument("--repeats", type=int, default=5, help="steady-state repetitions (default: %(default)s)")
     sp.set_defaults(func=cmd_bench)

@@ -30,12 +30,40 @@ MM_PER_INCH = 25.4
 ARC_RADIUS_TOL_MM = 0.002
 
 # G codes in tenths (G61.1 -> 611) -> modal group, as in the RS274NGC standard.
-_G_GROUP = {0: 1, 10: 1, 20: 1, 30: 1, 40: 0, 280: 0, 170: 2, 900: 3, 910: 3, 940: 5,
-            200: 6, 210: 6, 400: 7, 610: 13, 611: 13, 640: 13}
+_G_GROUP = {
+    0: 1,
+    10: 1,
+    20: 1,
+    30: 1,
+    40: 0,
+    280: 0,
+    170: 2,
+    900: 3,
+    910: 3,
+    940: 5,
+    200: 6,
+    210: 6,
+    400: 7,
+    610: 13,
+    611: 13,
+    640: 13,
+}
 _M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7}
-_NOT_YET = {180: "G18 (XZ plane)", 190: "G19 (YZ plane)", 50: "G5 cubic splines", 51: "G5.1 splines",
-            52: "G5.2 NURBS", 62: "G6.2 NURBS", 530: "G53", 920: "G92", 540: "work offset G54",
-            901: "G90.1", 911: "G91.1", 410: "cutter compensation G41", 420: "cutter compensation G42"}
+_NOT_YET = {
+    180: "G18 (XZ plane)",
+    190: "G19 (YZ plane)",
+    50: "G5 cubic splines",
+    51: "G5.1 splines",
+    52: "G5.2 NURBS",
+    62: "G6.2 NURBS",
+    530: "G53",
+    920: "G92",
+    540: "work offset G54",
+    901: "G90.1",
+    911: "G91.1",
+    410: "cutter compensation G41",
+    420: "cutter compensation G42",
+}
 _AXES = ("X", "Y", "Z")
 _ALLOWED = set("GMFSTNPQXYZIJKR")
 
@@ -53,9 +81,28 @@ class _State:
     exact_stop: bool = False  # G61.1
     blend_tol: float = math.inf  # G64 without P (LinuxCNC's start-up mode)
     pending_stop: bool = True
-    rows: dict[str, list] = field(default_factory=lambda: {k: [] for k in (
-        "kind", "start", "end", "center", "turn", "feed", "rapid", "laser", "power", "dwell_s",
-        "stop_before", "blend_tol", "event", "event_value", "line")})
+    rows: dict[str, list] = field(
+        default_factory=lambda: {
+            k: []
+            for k in (
+                "kind",
+                "start",
+                "end",
+                "center",
+                "turn",
+                "feed",
+                "rapid",
+                "laser",
+                "power",
+                "dwell_s",
+                "stop_before",
+                "blend_tol",
+                "event",
+                "event_value",
+                "line",
+            )
+        }
+    )
 
 
 class _Block:
@@ -78,13 +125,16 @@ class _Block:
                 table, groups = (_G_GROUP, g_groups) if w.letter == "G" else (_M_GROUP, m_groups)
                 if abs(exact - code) > 1e-9 or code not in table:
                     what = _NOT_YET.get(code) if w.letter == "G" and abs(exact - code) < 1e-9 else None
-                    raise self.error(w, f"{what} is not supported yet" if what
-                                     else f"unknown or unsupported word {w.letter}{w.text}")
+                    raise self.error(
+                        w, f"{what} is not supported yet" if what else f"unknown or unsupported word {w.letter}{w.text}"
+                    )
                 group = table[code]
                 if group in groups:
                     other = groups[group]
-                    raise self.error(w, f"{w.letter}{w.text} and {other.letter}{other.text} are in the same modal "
-                                     "group; one per block")
+                    raise self.error(
+                        w,
+                        f"{w.letter}{w.text} and {other.letter}{other.text} are in the same modal group; one per block",
+                    )
                 groups[group] = w
                 (self.g if w.letter == "G" else self.m).append((code, w))
             else:
@@ -128,9 +178,20 @@ class _Interpreter:
         self.ended = False
 
     # -- rows -------------------------------------------------------------------------------
-    def emit(self, kind: Kind, line: int, end: np.ndarray | None = None, *, center=None, turn: int = 0,
-             feed: float = math.nan, rapid: bool = False, dwell_s: float = 0.0, event: int = 0,
-             event_value: int = 0) -> None:
+    def emit(
+        self,
+        kind: Kind,
+        line: int,
+        end: np.ndarray | None = None,
+        *,
+        center=None,
+        turn: int = 0,
+        feed: float = math.nan,
+        rapid: bool = False,
+        dwell_s: float = 0.0,
+        event: int = 0,
+        event_value: int = 0,
+    ) -> None:
         s, r = self.s, self.s.rows
         end = s.pos if end is None else end
         r["kind"].append(int(kind))
@@ -226,8 +287,12 @@ class _Interpreter:
         elif motion_word is not None and s.motion in (20, 30):
             raise b.error(motion_word, "arc needs end point words (X/Y equal to the start for a full circle)")
         # stops and end
-        for code, ev in ((0, Event.PROGRAM_STOP), (1, Event.OPTIONAL_STOP), (2, Event.PROGRAM_END),
-                         (30, Event.PROGRAM_END)):
+        for code, ev in (
+            (0, Event.PROGRAM_STOP),
+            (1, Event.OPTIONAL_STOP),
+            (2, Event.PROGRAM_END),
+            (30, Event.PROGRAM_END),
+        ):
             if b.has_m(code) is not None:
                 self.emit(Kind.EVENT, b.line, event=ev)
                 if ev == Event.PROGRAM_END:
@@ -307,8 +372,11 @@ class _Interpreter:
             if r1 < 1e-9:
                 raise b.error(i or j, "arc centre coincides with its start point (radius zero)")
             if abs(r1 - r2) > ARC_RADIUS_TOL_MM:
-                raise b.error(i or j, f"radius to end {r2:.6g} mm differs from radius to start {r1:.6g} mm by "
-                              f"{abs(r1 - r2):.3g} mm (tolerance {ARC_RADIUS_TOL_MM} mm)")
+                raise b.error(
+                    i or j,
+                    f"radius to end {r2:.6g} mm differs from radius to start {r1:.6g} mm by "
+                    f"{abs(r1 - r2):.3g} mm (tolerance {ARC_RADIUS_TOL_MM} mm)",
+                )
             if d > 1e-9:
                 # Move the centre onto the chord's perpendicular bisector: the arc then passes
                 # exactly through both programmed points (a shift of at most the tolerance).
@@ -326,8 +394,13 @@ class _Interpreter:
         return out
 
 
-def parse_gcode(text: str, file: str = "<string>", *, start: tuple[float, ...] | np.ndarray = (0.0, 0.0, 0.0),
-                home: tuple[float, ...] | np.ndarray | None = None) -> Program:
+def parse_gcode(
+    text: str,
+    file: str = "<string>",
+    *,
+    start: tuple[float, ...] | np.ndarray = (0.0, 0.0, 0.0),
+    home: tuple[float, ...] | np.ndarray | None = None,
+) -> Program:
     """Interpret G-code ``text`` into a Program.
 
     Args:

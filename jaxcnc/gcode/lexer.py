@@ -70,12 +70,17 @@ def tokenize(raw: str, file: str, line_no: int) -> tuple[list[Word], list[str]]:
         letter = c.upper()
         m = _NUMBER.match(text, i + 1)
         if m is None and i + 1 < n and text[i + 1] in "#[":
-            raise SourceError(file, line_no, cols[i + 1], f"parametric programming ({text[i + 1]!r}) is not "
-                              "supported yet")
+            raise SourceError(
+                file, line_no, cols[i + 1], f"parametric programming ({text[i + 1]!r}) is not supported yet"
+            )
         if m is None:
             rest = text[i + 1 : i + 9]
-            raise SourceError(file, line_no, col, f"malformed number after {letter!r}: {rest!r}"
-                              if rest else f"word {letter!r} has no number")
+            raise SourceError(
+                file,
+                line_no,
+                col,
+                f"malformed number after {letter!r}: {rest!r}" if rest else f"word {letter!r} has no number",
+            )
         end = m.end()
         if end < n and (text[end] == "." or text[end].isdigit()):
             raise SourceError(file, line_no, col, f"malformed number {text[i + 1 : end + 1]!r} after {letter!r}")

@@ -20,8 +20,9 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.spans import SpanKind
 
 
-def u_of_s(kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, half_angle: jnp.ndarray,
-           s: jnp.ndarray) -> jnp.ndarray:
+def u_of_s(
+    kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, half_angle: jnp.ndarray, s: jnp.ndarray
+) -> jnp.ndarray:
     """Span parameter at arc length ``s`` from the span start (all arrays ``(m,)``).
 
     ``s`` is clipped to ``[0, length]``; point spans give ``u = 0``.

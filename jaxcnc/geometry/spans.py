@@ -98,9 +98,18 @@ def _line_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     d = b - a
     length = np.linalg.norm(d, axis=1)
     t = d / length[:, None]
-    return dict(coeffs=_homogeneous_power(a, (a + b) / 2, b, np.ones(len(rows))), kind=SpanKind.LINE,
-                length=length, radius=np.inf, half_angle=0.0, tangent_in=t, tangent_out=t,
-                lo=np.minimum(a, b), hi=np.maximum(a, b), block=rows)
+    return dict(
+        coeffs=_homogeneous_power(a, (a + b) / 2, b, np.ones(len(rows))),
+        kind=SpanKind.LINE,
+        length=length,
+        radius=np.inf,
+        half_angle=0.0,
+        tangent_in=t,
+        tangent_out=t,
+        lo=np.minimum(a, b),
+        hi=np.maximum(a, b),
+        block=rows,
+    )
 
 
 def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -149,16 +158,35 @@ def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
         ext = cc + rr[:, None] * np.array([dx, dy, 0.0])
         lo = np.where(inside[:, None], np.minimum(lo, ext), lo)
         hi = np.where(inside[:, None], np.maximum(hi, ext), hi)
-    return dict(coeffs=_homogeneous_power(p0, p1, p2, w1), kind=SpanKind.ARC, length=rr * phi, radius=rr,
-                half_angle=phi / 2, tangent_in=tangent(a0), tangent_out=tangent(a1), lo=lo, hi=hi,
-                block=rows[idx])
+    return dict(
+        coeffs=_homogeneous_power(p0, p1, p2, w1),
+        kind=SpanKind.ARC,
+        length=rr * phi,
+        radius=rr,
+        half_angle=phi / 2,
+        tangent_in=tangent(a0),
+        tangent_out=tangent(a1),
+        lo=lo,
+        hi=hi,
+        block=rows[idx],
+    )
 
 
 def _point_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     a = p.end[rows]
     z = np.zeros_like(a)
-    return dict(coeffs=_homogeneous_power(a, a, a, np.ones(len(rows))), kind=SpanKind.POINT, length=0.0,
-                radius=np.inf, half_angle=0.0, tangent_in=z, tangent_out=z, lo=a, hi=a, block=rows)
+    return dict(
+        coeffs=_homogeneous_power(a, a, a, np.ones(len(rows))),
+        kind=SpanKind.POINT,
+        length=0.0,
+        radius=np.inf,
+        half_angle=0.0,
+        tangent_in=z,
+        tangent_out=z,
+        lo=a,
+        hi=a,
+        block=rows,
+    )
 
 
 def build_spans(program: Program) -> Spans:
@@ -171,19 +199,36 @@ def build_spans(program: Program) -> Spans:
     is_line = (kind == Kind.LINE) & (move_len > MIN_LENGTH_MM)
     is_arc = kind == Kind.ARC
     is_point = (kind == Kind.DWELL) | (kind == Kind.EVENT)
-    parts = [f(program, np.flatnonzero(m)) for f, m in
-             ((_line_spans, is_line), (_arc_spans, is_arc), (_point_spans, is_point)) if m.any()]
+    parts = [
+        f(program, np.flatnonzero(m))
+        for f, m in ((_line_spans, is_line), (_arc_spans, is_arc), (_point_spans, is_point))
+        if m.any()
+    ]
     if not parts:
         empty = np.zeros((0, 3))
-        return Spans(np.zeros((0, DEGREE + 1, 4)), np.zeros(0, np.int8), np.zeros(0), np.zeros(0), np.zeros(0),
-                     empty, empty, empty, empty, np.zeros(0, np.int32))
+        return Spans(
+            np.zeros((0, DEGREE + 1, 4)),
+            np.zeros(0, np.int8),
+            np.zeros(0),
+            np.zeros(0),
+            np.zeros(0),
+            empty,
+            empty,
+            empty,
+            empty,
+            np.zeros(0, np.int32),
+        )
     n_of = [len(np.atleast_1d(pt["block"])) for pt in parts]
     cols = {}
-    for key in ("coeffs", "kind", "length", "radius", "half_angle", "tangent_in", "tangent_out", "lo", "hi",
-                "block"):
-        cols[key] = np.concatenate([np.broadcast_to(np.asarray(pt[key]), (n,) + np.shape(pt[key])[1:])
-                                    if np.ndim(pt[key]) == 0 else np.asarray(pt[key])
-                                    for pt, n in zip(parts, n_of)])
+    for key in ("coeffs", "kind", "length", "radius", "half_angle", "tangent_in", "tangent_out", "lo", "hi", "block"):
+        cols[key] = np.concatenate(
+            [
+                np.broadcast_to(np.asarray(pt[key]), (n,) + np.shape(pt[key])[1:])
+                if np.ndim(pt[key]) == 0
+                else np.asarray(pt[key])
+                for pt, n in zip(parts, n_of, strict=False)
+            ]
+        )
     # Path order: by program row, then by piece order within an arc (stable sort keeps it).
     order = np.argsort(cols["block"], kind="stable")
     out = {k: np.ascontiguousarray(v[order]) for k, v in cols.items()}

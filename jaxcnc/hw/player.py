@@ -54,5 +54,9 @@ def play(table: TableFile, sink: Sink, *, chunk_rows: int = 4096, progress=None)
         sink.close()
     if progress:
         progress(sink.executed_tick() + 1)
-    return PlayResult(rows_sent=sent, executed_tick=sink.executed_tick(), wall_s=time.perf_counter() - t0,
-                      table_time_s=(h.n_rows - 1) / h.tick_hz)
+    return PlayResult(
+        rows_sent=sent,
+        executed_tick=sink.executed_tick(),
+        wall_s=time.perf_counter() - t0,
+        table_time_s=(h.n_rows - 1) / h.tick_hz,
+    )

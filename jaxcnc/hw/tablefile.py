@@ -60,8 +60,15 @@ class EventKind:
     PROGRAM_END = 6  # M2/M30
     DWELL = 7  # a dwell starts: value = seconds
 
-    NAMES = {1: "block", 2: "laser", 3: "program_stop", 4: "optional_stop", 5: "tool_change",
-             6: "program_end", 7: "dwell"}
+    NAMES = {
+        1: "block",
+        2: "laser",
+        3: "program_stop",
+        4: "optional_stop",
+        5: "tool_change",
+        6: "program_end",
+        7: "dwell",
+    }
 
 
 @dataclass(frozen=True)
@@ -108,8 +115,22 @@ def _align(n: int) -> int:
 
 def _pack_header(h: TableHeader) -> bytes:
     meta = json.dumps(h.meta, sort_keys=True).encode("utf-8")
-    fixed = _HEADER.pack(MAGIC, VERSION, h.n_axes, h.block_rows, h.flags, h.tick_hz, h.discrete_mm, h.n_rows,
-                         h.n_blocks, len(meta), h.n_events, h.events_crc, h.data_offset, h.events_offset)
+    fixed = _HEADER.pack(
+        MAGIC,
+        VERSION,
+        h.n_axes,
+        h.block_rows,
+        h.flags,
+        h.tick_hz,
+        h.discrete_mm,
+        h.n_rows,
+        h.n_blocks,
+        len(meta),
+        h.n_events,
+        h.events_crc,
+        h.data_offset,
+        h.events_offset,
+    )
     fixed = fixed.ljust(124, b"\0")
     crc = zlib.crc32(fixed + meta)
     return fixed + struct.pack("<I", crc) + meta
@@ -124,8 +145,18 @@ class TableWriter:
     leaves a table that looks valid.
     """
 
-    def __init__(self, path: str | Path, *, axes: list[str], tick_hz: float, discrete_mm: float, n_rows: int,
-                 meta: dict | None = None, fine: bool = True, block_rows: int = DEFAULT_BLOCK_ROWS):
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        axes: list[str],
+        tick_hz: float,
+        discrete_mm: float,
+        n_rows: int,
+        meta: dict | None = None,
+        fine: bool = True,
+        block_rows: int = DEFAULT_BLOCK_ROWS,
+    ):
         if n_rows < 1:
             raise ValueError("a table has at least one row")
         self.path = Path(path)
@@ -139,8 +170,20 @@ class TableWriter:
         crc_len = 4 * n_blocks * (2 if fine else 1)
         data_offset = _align(head_len + crc_len)
         events_offset = data_offset + n_blocks * block_rows * n_axes * 4 * (2 if fine else 1)
-        self.header = TableHeader(n_axes, block_rows, flags, float(tick_hz), float(discrete_mm), n_rows, n_blocks,
-                                  0, 0, data_offset, events_offset, meta)
+        self.header = TableHeader(
+            n_axes,
+            block_rows,
+            flags,
+            float(tick_hz),
+            float(discrete_mm),
+            n_rows,
+            n_blocks,
+            0,
+            0,
+            data_offset,
+            events_offset,
+            meta,
+        )
         self._f = open(self.tmp, "wb+")  # noqa: SIM115 - closed in close()
         self._f.truncate(events_offset)
         self._rows = 0
@@ -254,10 +297,36 @@ class TableFile:
             meta = json.loads(meta_raw.decode("utf-8"))
         except ValueError:
             raise self._err("header metadata is not valid JSON") from None
-        (_, _, n_axes, block_rows, flags, tick_hz, discrete, n_rows, n_blocks, _, n_events, events_crc,
-         data_offset, events_offset) = vals
-        self.header = h = TableHeader(n_axes, block_rows, flags, tick_hz, discrete, n_rows, n_blocks, n_events,
-                                      events_crc, data_offset, events_offset, meta)
+        (
+            _,
+            _,
+            n_axes,
+            block_rows,
+            flags,
+            tick_hz,
+            discrete,
+            n_rows,
+            n_blocks,
+            _,
+            n_events,
+            events_crc,
+            data_offset,
+            events_offset,
+        ) = vals
+        self.header = h = TableHeader(
+            n_axes,
+            block_rows,
+            flags,
+            tick_hz,
+            discrete,
+            n_rows,
+            n_blocks,
+            n_events,
+            events_crc,
+            data_offset,
+            events_offset,
+            meta,
+        )
         if n_axes < 1 or block_rows < 1 or n_blocks != -(-n_rows // block_rows) or tick_hz <= 0 or discrete <= 0:
             raise self._err("inconsistent header fields")
         expected = events_offset + n_events * EVENT_DTYPE.itemsize
@@ -265,11 +334,15 @@ class TableFile:
             raise self._err(f"file is {size} bytes, header says {expected} (truncated or extended)")
         rows = n_blocks * block_rows
         self._pos = np.memmap(self.path, dtype="<i4", mode="r", offset=data_offset, shape=(rows, n_axes))
-        self._fine = (np.memmap(self.path, dtype="<i4", mode="r", offset=h.fine_offset, shape=(rows, n_axes))
-                      if h.has_fine else None)
+        self._fine = (
+            np.memmap(self.path, dtype="<i4", mode="r", offset=h.fine_offset, shape=(rows, n_axes))
+            if h.has_fine
+            else None
+        )
         n_ch = 2 if h.has_fine else 1
         self._crc = np.fromfile(self.path, dtype="<u4", count=n_ch * n_blocks, offset=h.crc_offset).reshape(
-            n_ch, n_blocks)
+            n_ch, n_blocks
+        )
         self.events = np.fromfile(self.path, dtype=EVENT_DTYPE, count=n_events, offset=events_offset)
         if verify:
             self.verify()

@@ -8,5 +8,4 @@ from jaxcnc.planners.job import PlannedJob, plan_job, program_start
 from jaxcnc.planners.registry import get_planner, planner_names, register_planner
 from jaxcnc.planners.timelaw import Plan
 
-__all__ = ["Plan", "PlannedJob", "get_planner", "plan_job", "planner_names", "program_start",
-           "register_planner"]
+__all__ = ["Plan", "PlannedJob", "get_planner", "plan_job", "planner_names", "program_start", "register_planner"]

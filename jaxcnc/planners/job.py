@@ -51,8 +51,12 @@ def _check_axes(program: Program, machine: MachineConfig) -> tuple[int, ...]:
         if axis not in names and program.uses_axis(col):
             moved = np.flatnonzero(program.end[:, col] != program.start[:, col])
             line = int(program.line[moved[0]]) if moved.size else 0
-            raise SourceError(program.file, line, 0, f"the program moves axis {axis.upper()} but machine "
-                              f"{machine.name!r} has no axis {axis!r}")
+            raise SourceError(
+                program.file,
+                line,
+                0,
+                f"the program moves axis {axis.upper()} but machine {machine.name!r} has no axis {axis!r}",
+            )
     return tuple(PROGRAM_AXES.index(a) if a in PROGRAM_AXES else -1 for a in names)
 
 
@@ -65,9 +69,13 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
         if bad.size:
             k = bad[0]
             value = spans.lo[k, col] if spans.lo[k, col] < ax.min else spans.hi[k, col]
-            raise SourceError(program.file, int(program.line[spans.block[k]]), 0,
-                              f"{axis.upper()} reaches {value:.6g} mm, outside the travel of machine "
-                              f"{machine.name!r} [{ax.min:g}, {ax.max:g}]")
+            raise SourceError(
+                program.file,
+                int(program.line[spans.block[k]]),
+                0,
+                f"{axis.upper()} reaches {value:.6g} mm, outside the travel of machine "
+                f"{machine.name!r} [{ax.min:g}, {ax.max:g}]",
+            )
 
 
 def plan_job(program: Program, machine: MachineConfig, planner: str = "lookahead") -> PlannedJob:
@@ -89,5 +97,11 @@ def plan_job(program: Program, machine: MachineConfig, planner: str = "lookahead
     v_max = np.where(np.isnan(lim["v_max"]), np.inf, lim["v_max"])
     a_max = np.where(np.isnan(lim["a_max"]), np.inf, lim["a_max"])
     plan = get_planner(planner)(spans, feed, dwell, stop, v_max, a_max, machine)
-    return PlannedJob(program=program, spans=spans, plan=plan, machine=machine, axis_source=axis_source,
-                      plan_wall_s=time.perf_counter() - t0)
+    return PlannedJob(
+        program=program,
+        spans=spans,
+        plan=plan,
+        machine=machine,
+        axis_source=axis_source,
+        plan_wall_s=time.perf_counter() - t0,
+    )

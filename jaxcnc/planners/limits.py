@@ -43,9 +43,18 @@ ARC_NORMAL_SHARE = 2**-0.5
 CORNER_ANGLE_RAD = 0.0175  # 1°
 
 
-def span_caps(kind: jnp.ndarray, length: jnp.ndarray, radius: jnp.ndarray, tangent: jnp.ndarray,
-              feed_mm_s: jnp.ndarray, v_max: jnp.ndarray, a_max: jnp.ndarray, chord_tol_mm: float,
-              tick_hz: float, at_kink: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+def span_caps(
+    kind: jnp.ndarray,
+    length: jnp.ndarray,
+    radius: jnp.ndarray,
+    tangent: jnp.ndarray,
+    feed_mm_s: jnp.ndarray,
+    v_max: jnp.ndarray,
+    a_max: jnp.ndarray,
+    chord_tol_mm: float,
+    tick_hz: float,
+    at_kink: jnp.ndarray,
+) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Speed cap (as v², mm²/s²) and tangential acceleration cap (mm/s²) of each span.
 
     Args:
@@ -87,8 +96,9 @@ def is_corner(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray) -> jnp.nda
     return chord > 2.0 * jnp.sin(CORNER_ANGLE_RAD / 2)
 
 
-def junction_caps(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray, a_max: jnp.ndarray,
-                  tick_hz: float) -> jnp.ndarray:
+def junction_caps(
+    tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray, a_max: jnp.ndarray, tick_hz: float
+) -> jnp.ndarray:
     """Cap (v²) on the speed through each junction from the velocity step it causes.
 
     Args:

@@ -17,9 +17,16 @@ from jaxcnc.planners.timelaw import Plan
 
 
 class Planner(Protocol):
-    def __call__(self, spans: Spans, span_feed_mm_s: np.ndarray, span_dwell_s: np.ndarray,
-                 span_stop_before: np.ndarray, axis_v_max: np.ndarray, axis_a_max: np.ndarray,
-                 machine: MachineConfig) -> Plan:
+    def __call__(
+        self,
+        spans: Spans,
+        span_feed_mm_s: np.ndarray,
+        span_dwell_s: np.ndarray,
+        span_stop_before: np.ndarray,
+        axis_v_max: np.ndarray,
+        axis_a_max: np.ndarray,
+        machine: MachineConfig,
+    ) -> Plan:
         """Plan the time law of ``spans`` (per-span programmed speed, dwell and forced stops;
         axis limits of shape ``(3,)`` for x, y, z, ``inf`` where the machine lacks the axis)."""
         ...

@@ -67,8 +67,9 @@ def _safe_div(num: jnp.ndarray, den: jnp.ndarray) -> jnp.ndarray:
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
 
-def trapezoids(x_node: jnp.ndarray, x_cap: jnp.ndarray, a: jnp.ndarray, length: jnp.ndarray,
-               dwell_s: jnp.ndarray) -> dict[str, jnp.ndarray]:
+def trapezoids(
+    x_node: jnp.ndarray, x_cap: jnp.ndarray, a: jnp.ndarray, length: jnp.ndarray, dwell_s: jnp.ndarray
+) -> dict[str, jnp.ndarray]:
     """Per-span trapezoid from node ``v²`` ``(n+1,)`` and span caps/accel/length/dwell ``(n,)``."""
     x0, x1 = x_node[:-1], x_node[1:]
     a_fin = jnp.where(jnp.isfinite(a), a, 0.0)
@@ -85,8 +86,16 @@ def trapezoids(x_node: jnp.ndarray, x_cap: jnp.ndarray, a: jnp.ndarray, length: 
     t_dec = _safe_div(2.0 * l_dec, vp + v1)
     t_cru = _safe_div(l_cru, vp) + dwell_s
     # Ramp accelerations from the realised times: s(t) then ends exactly at L.
-    return dict(v0=v0, vp=vp, v1=v1, t_acc=t_acc, t_cru=t_cru, t_dec=t_dec,
-                a_acc=_safe_div(vp - v0, t_acc), a_dec=_safe_div(vp - v1, t_dec))
+    return dict(
+        v0=v0,
+        vp=vp,
+        v1=v1,
+        t_acc=t_acc,
+        t_cru=t_cru,
+        t_dec=t_dec,
+        a_acc=_safe_div(vp - v0, t_acc),
+        a_dec=_safe_div(vp - v1, t_dec),
+    )
 
 
 def _segmented_cumsum(values: jnp.ndarray, starts: jnp.ndarray) -> jnp.ndarray:
@@ -101,8 +110,7 @@ def _segmented_cumsum(values: jnp.ndarray, starts: jnp.ndarray) -> jnp.ndarray:
     return out
 
 
-def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_hz: float
-                   ) -> dict[str, jnp.ndarray]:
+def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_hz: float) -> dict[str, jnp.ndarray]:
     """Stretch each rest-to-rest group to a whole number of ticks and place segments on the grid.
 
     Args:
@@ -138,8 +146,9 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
     return out
 
 
-def s_at(plan: dict[str, jnp.ndarray], length: jnp.ndarray, seg: jnp.ndarray, tick: jnp.ndarray,
-         tick_hz: float) -> jnp.ndarray:
+def s_at(
+    plan: dict[str, jnp.ndarray], length: jnp.ndarray, seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float
+) -> jnp.ndarray:
     """Arc length from the start of segment ``seg`` at integer ``tick`` (arrays ``(m,)``).
 
     ``plan`` holds the per-segment arrays of :class:`Plan` (as JAX arrays).

@@ -29,8 +29,9 @@ def bucket_size(n: int) -> int:
 
 
 @jax.jit
-def plan_arrays(kind, length, radius, tangent_in, tangent_out, feed, dwell, stop_before, v_max, a_max,
-                chord_tol, tick_hz):
+def plan_arrays(
+    kind, length, radius, tangent_in, tangent_out, feed, dwell, stop_before, v_max, a_max, chord_tol, tick_hz
+):
     """The planner as one array program; all span arrays ``(n,)`` or ``(n, 3)``.
 
     Returns the dict of :func:`~jaxcnc.planners.timelaw.align_to_ticks` plus ``x_node`` (v² at
@@ -61,23 +62,38 @@ def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
 
 
 @register_planner("lookahead")
-def plan_lookahead(spans: Spans, span_feed_mm_s: np.ndarray, span_dwell_s: np.ndarray,
-                   span_stop_before: np.ndarray, axis_v_max: np.ndarray, axis_a_max: np.ndarray,
-                   machine: MachineConfig) -> Plan:
+def plan_lookahead(
+    spans: Spans,
+    span_feed_mm_s: np.ndarray,
+    span_dwell_s: np.ndarray,
+    span_stop_before: np.ndarray,
+    axis_v_max: np.ndarray,
+    axis_a_max: np.ndarray,
+    machine: MachineConfig,
+) -> Plan:
     """Plan with the whole-program trapezoidal look-ahead (see the module docstring)."""
     n = len(spans)
     m = bucket_size(n)
     args = (
-        _pad(spans.kind, m, SpanKind.POINT), _pad(spans.length, m, 0.0), _pad(spans.radius, m, np.inf),
-        _pad(spans.tangent_in, m, 0.0), _pad(spans.tangent_out, m, 0.0), _pad(span_feed_mm_s, m, 0.0),
-        _pad(span_dwell_s, m, 0.0), _pad(span_stop_before, m, True),
+        _pad(spans.kind, m, SpanKind.POINT),
+        _pad(spans.length, m, 0.0),
+        _pad(spans.radius, m, np.inf),
+        _pad(spans.tangent_in, m, 0.0),
+        _pad(spans.tangent_out, m, 0.0),
+        _pad(span_feed_mm_s, m, 0.0),
+        _pad(span_dwell_s, m, 0.0),
+        _pad(span_stop_before, m, True),
     )
     keep = 1.0 - NUMERIC_MARGIN
-    out = plan_arrays(*args, jnp.asarray(axis_v_max) * keep, jnp.asarray(axis_a_max) * keep,
-                      machine.path.chord_tol_mm, machine.tick_hz)
+    out = plan_arrays(
+        *args,
+        jnp.asarray(axis_v_max) * keep,
+        jnp.asarray(axis_a_max) * keep,
+        machine.path.chord_tol_mm,
+        machine.tick_hz,
+    )
     out = jax.device_get(out)
-    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks",
-            "first_tick")
+    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
     arrays = {k: np.asarray(out[k][:n]) for k in keys}
     for v in arrays.values():
         v.setflags(write=False)

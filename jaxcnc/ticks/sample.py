@@ -29,8 +29,9 @@ _SPAN_KEYS = ("coeffs", "kind", "length", "radius", "half_angle")
 
 
 @partial(jax.jit, static_argnames=("chunk",))
-def _positions_chunk(first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray,
-                     chunk: int) -> tuple[jnp.ndarray, jnp.ndarray]:
+def _positions_chunk(
+    first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
+) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Exact program-axis positions ``(chunk, 3)`` and their segment, for ticks ``first + i``."""
     tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
     seg = segment_of_tick(plan["first_tick"], tick)
@@ -63,8 +64,9 @@ class TickSampler:
             return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
 
         self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in _PLAN_KEYS}
-        self._spans = {k: jnp.asarray(pad(getattr(spans, k), 1.0 if k in ("length", "radius") else 0))
-                       for k in _SPAN_KEYS}
+        self._spans = {
+            k: jnp.asarray(pad(getattr(spans, k), 1.0 if k in ("length", "radius") else 0)) for k in _SPAN_KEYS
+        }
         m_axes = job.machine.axis_names
         self._src = np.asarray(job.axis_source)
         self._home = np.array([job.machine.axis(a).home for a in m_axes])
@@ -75,8 +77,14 @@ class TickSampler:
 
     def program_positions(self, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
         """Exact x, y, z positions ``(count, 3)`` mm and segment index of ticks ``first..``."""
-        p, seg = _positions_chunk(jnp.int64(first), jnp.int64(self.job.plan.n_ticks), self._plan, self._spans,
-                                  jnp.float64(self.job.machine.tick_hz), self.chunk)
+        p, seg = _positions_chunk(
+            jnp.int64(first),
+            jnp.int64(self.job.plan.n_ticks),
+            self._plan,
+            self._spans,
+            jnp.float64(self.job.machine.tick_hz),
+            self.chunk,
+        )
         return np.asarray(p)[:count], np.asarray(seg)[:count]
 
     def machine_positions(self, program_p: np.ndarray) -> np.ndarray:

@@ -20,8 +20,12 @@ from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.sample import TickSampler, quantize
 
-_EVENT_OF = {Event.PROGRAM_STOP: EventKind.PROGRAM_STOP, Event.OPTIONAL_STOP: EventKind.OPTIONAL_STOP,
-             Event.TOOL_CHANGE: EventKind.TOOL_CHANGE, Event.PROGRAM_END: EventKind.PROGRAM_END}
+_EVENT_OF = {
+    Event.PROGRAM_STOP: EventKind.PROGRAM_STOP,
+    Event.OPTIONAL_STOP: EventKind.OPTIONAL_STOP,
+    Event.TOOL_CHANGE: EventKind.TOOL_CHANGE,
+    Event.PROGRAM_END: EventKind.PROGRAM_END,
+}
 
 
 def job_events(job: PlannedJob) -> np.ndarray:
@@ -44,8 +48,11 @@ def job_events(job: PlannedJob) -> np.ndarray:
     add(tick[b], EventKind.BLOCK, prog.line[rows[b]], rows[b], seg=b)
     # Laser: the beam burns on feed moves and dwells while M3/M4 is on; rapids and events are dark.
     kind = prog.kind[rows]
-    lit = (prog.laser[rows] != LaserMode.OFF) & ~prog.rapid[rows] & ((kind == Kind.LINE) | (kind == Kind.ARC) |
-                                                                     (kind == Kind.DWELL))
+    lit = (
+        (prog.laser[rows] != LaserMode.OFF)
+        & ~prog.rapid[rows]
+        & ((kind == Kind.LINE) | (kind == Kind.ARC) | (kind == Kind.DWELL))
+    )
     power = np.where(lit, prog.power[rows], 0.0)
     mode = np.where(lit, prog.laser[rows], 0)
     changed = np.flatnonzero(np.diff(np.concatenate([[0.0], power])) != 0)
@@ -69,8 +76,7 @@ def _sha256(path: str) -> str | None:
         return None
 
 
-def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = "lookahead"
-                ) -> Path:
+def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = "lookahead") -> Path:
     """Sample ``job`` at its tick rate and write the table file at ``path``.
 
     ``progress``: show a progress bar (``None``: only on a terminal).
@@ -78,15 +84,27 @@ def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = No
     m = job.machine
     sampler = TickSampler(job)
     meta = {
-        "machine": m.name, "machine_file": m.source, "machine_sha256": _sha256(m.source),
-        "source": job.program.file, "source_sha256": _sha256(job.program.file),
-        "generator": f"jaxcnc {jaxcnc.__version__}", "planner": planner,
-        "total_time_s": job.plan.total_time_s, "n_blocks": job.program.n_blocks,
+        "machine": m.name,
+        "machine_file": m.source,
+        "machine_sha256": _sha256(m.source),
+        "source": job.program.file,
+        "source_sha256": _sha256(job.program.file),
+        "generator": f"jaxcnc {jaxcnc.__version__}",
+        "planner": planner,
+        "total_time_s": job.plan.total_time_s,
+        "n_blocks": job.program.n_blocks,
     }
-    with TableWriter(path, axes=list(m.axis_names), tick_hz=m.tick_hz, discrete_mm=m.discrete_mm,
-                     n_rows=sampler.n_rows, meta=meta) as w:
-        bar = tqdm(total=sampler.n_rows, unit="tick", unit_scale=True, desc="ticks", disable=progress is False
-                   if progress is not None else None, leave=False)
+    with TableWriter(
+        path, axes=list(m.axis_names), tick_hz=m.tick_hz, discrete_mm=m.discrete_mm, n_rows=sampler.n_rows, meta=meta
+    ) as w:
+        bar = tqdm(
+            total=sampler.n_rows,
+            unit="tick",
+            unit_scale=True,
+            desc="ticks",
+            disable=progress is False if progress is not None else None,
+            leave=False,
+        )
         for _first, p in sampler:
             pos, fine = quantize(p, m.discrete_mm)
             w.write(np.asarray(pos), np.asarray(fine))

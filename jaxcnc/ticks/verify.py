@@ -40,8 +40,9 @@ class Violation:
         span = f"tick {self.first_tick}" + (f" (to {self.last_tick})" if self.last_tick != self.first_tick else "")
         name = {"v": "|v|", "a": "|a|", "j": "|j|", "pos": "position"}[self.quantity]
         rel = ">" if self.quantity != "pos" or self.value > self.limit else "<"
-        return (f"{span} axis {self.axis}: {name} = {self.value:.6g} {_UNITS[self.quantity]} {rel} limit "
-                f"{self.limit:.6g}")
+        return (
+            f"{span} axis {self.axis}: {name} = {self.value:.6g} {_UNITS[self.quantity]} {rel} limit {self.limit:.6g}"
+        )
 
 
 @dataclass
@@ -67,7 +68,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     if not mask.any():
         return []
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1, strict=False))
 
 
 def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 20) -> Measurement:
@@ -83,18 +84,31 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
     limits = {}
     if machine is not None:
         if not h.has_fine:
-            meas.violations.append(Violation(0, 0, "no fine channel: speed and acceleration cannot be verified at "
-                                             "the tick rate", "table", 0, 0))
+            meas.violations.append(
+                Violation(
+                    0, 0, "no fine channel: speed and acceleration cannot be verified at the tick rate", "table", 0, 0
+                )
+            )
         if abs(h.tick_hz - machine.tick_hz) > 1e-9 * machine.tick_hz:
-            meas.violations.append(Violation(0, 0, f"tick rate {h.tick_hz:g} Hz differs from the machine's "
-                                             f"{machine.tick_hz:g} Hz", "table", 0, 0))
+            meas.violations.append(
+                Violation(
+                    0, 0, f"tick rate {h.tick_hz:g} Hz differs from the machine's {machine.tick_hz:g} Hz", "table", 0, 0
+                )
+            )
         if abs(h.discrete_mm - machine.discrete_mm) > 1e-12:
-            meas.violations.append(Violation(0, 0, f"discrete {h.discrete_mm:g} mm differs from the machine's "
-                                             f"{machine.discrete_mm:g} mm", "table", 0, 0))
+            meas.violations.append(
+                Violation(
+                    0,
+                    0,
+                    f"discrete {h.discrete_mm:g} mm differs from the machine's {machine.discrete_mm:g} mm",
+                    "table",
+                    0,
+                    0,
+                )
+            )
         for a in axes:
             if a not in machine.axis_names:
-                meas.violations.append(Violation(0, 0, f"axis {a!r} is not on machine {machine.name!r}", "table", 0,
-                                                 0))
+                meas.violations.append(Violation(0, 0, f"axis {a!r} is not on machine {machine.name!r}", "table", 0, 0))
                 continue
             ax = machine.axis(a)
             limits[a] = {"v": ax.v_max, "a": ax.a_max, "j": ax.j_max}
@@ -115,8 +129,11 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
         stop = min(start + chunk_rows, n + 3)
         idx = np.clip(np.arange(start - 3, stop), 0, n - 1)
         pos = np.asarray(table.positions[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
-        fine = (np.asarray(table.fine[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
-                if h.has_fine else np.zeros_like(pos))
+        fine = (
+            np.asarray(table.fine[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
+            if h.has_fine
+            else np.zeros_like(pos)
+        )
         pmin = np.minimum(pmin, pos.min(axis=0) * q)
         pmax = np.maximum(pmax, pos.max(axis=0) * q)
         d = np.diff(pos, axis=0) * np.int64(2**32) + np.diff(fine, axis=0)  # exact int64
@@ -130,8 +147,7 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
                     continue
                 bad = val[:, i] > lim * (1 + REL_SLACK) + noise[name]
                 for r0, r1 in _runs(bad):
-                    pending.setdefault((a, name), []).append((start + r0, start + r1,
-                                                              float(val[r0 : r1 + 1, i].max())))
+                    pending.setdefault((a, name), []).append((start + r0, start + r1, float(val[r0 : r1 + 1, i].max())))
     for (a, name), runs in pending.items():
         merged: list[list] = []
         for r0, r1, v in runs:  # join runs split by chunk boundaries
