@@ -113,11 +113,15 @@ def run_benchmarks(n_blocks: int = 100_000, repeats: int = 5, machine: MachineCo
     job = plan_job(prog, m)
     first_plan = time.perf_counter() - t0
     plan_s = _best(lambda: plan_job(prog, m), repeats)
-    print(f"  planning (parse excluded): first call {first_plan:.2f} s incl. JIT compile; "
-          f"steady {plan_s * 1e3:.1f} ms = {n_blocks / plan_s:,.0f} blocks/s")
+    print(
+        f"  planning (parse excluded): first call {first_plan:.2f} s incl. JIT compile; "
+        f"steady {plan_s * 1e3:.1f} ms = {n_blocks / plan_s:,.0f} blocks/s"
+    )
     v_min = float(np.min(job.plan.vp))
-    print(f"  planned job: {job.plan.total_time_s:.2f} s, {job.path_length_mm:.0f} mm, "
-          f"slowest block peak {v_min:.1f} mm/s (feed 100)")
+    print(
+        f"  planned job: {job.plan.total_time_s:.2f} s, {job.path_length_mm:.0f} mm, "
+        f"slowest block peak {v_min:.1f} mm/s (feed 100)"
+    )
 
     # look-ahead passes alone, same inputs for all three
     rng = np.random.default_rng(1)
@@ -137,10 +141,14 @@ def run_benchmarks(n_blocks: int = 100_000, repeats: int = 5, machine: MachineCo
     err = float(np.max(np.abs(ref_jax - ref_py)))
     print(f"  look-ahead passes on {n_blocks} junctions (compile {jit_compile:.2f} s apart):")
     print(f"    jaxcnc associative scan   {t_jax * 1e3:8.2f} ms  {n_blocks / t_jax:14,.0f} blocks/s")
-    print(f"    NumPy cumsum/cummin       {t_np * 1e3:8.2f} ms  {n_blocks / t_np:14,.0f} blocks/s"
-          f"  (jaxcnc {t_np / t_jax:.1f}x)")
-    print(f"    sequential Python loops   {t_py * 1e3:8.2f} ms  {n_blocks / t_py:14,.0f} blocks/s"
-          f"  (jaxcnc {t_py / t_jax:.1f}x); max |diff| {err:.2e} (mm/s)^2")
+    print(
+        f"    NumPy cumsum/cummin       {t_np * 1e3:8.2f} ms  {n_blocks / t_np:14,.0f} blocks/s"
+        f"  (jaxcnc {t_np / t_jax:.1f}x)"
+    )
+    print(
+        f"    sequential Python loops   {t_py * 1e3:8.2f} ms  {n_blocks / t_py:14,.0f} blocks/s"
+        f"  (jaxcnc {t_py / t_jax:.1f}x); max |diff| {err:.2e} (mm/s)^2"
+    )
 
     sampler = TickSampler(job)
     n_ticks = min(sampler.n_rows, 20 * sampler.chunk)
@@ -155,8 +163,10 @@ def run_benchmarks(n_blocks: int = 100_000, repeats: int = 5, machine: MachineCo
     sample_compile = time.perf_counter() - t0
     t_ticks = _best(sample_all, max(1, repeats // 2))
     rate = n_ticks / t_ticks
-    print(f"  tick sampling t -> s -> u -> position -> integers: first chunk {sample_compile:.2f} s incl. compile; "
-          f"steady {rate:,.0f} ticks/s = {rate / 1e4:,.0f}x the documents' 10 kHz real-time rate")
+    print(
+        f"  tick sampling t -> s -> u -> position -> integers: first chunk {sample_compile:.2f} s incl. compile; "
+        f"steady {rate:,.0f} ticks/s = {rate / 1e4:,.0f}x the documents' 10 kHz real-time rate"
+    )
     return {
         "n_blocks": n_blocks,
         "plan_first_call_s": first_plan,
