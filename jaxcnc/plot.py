@@ -22,23 +22,33 @@ from jaxcnc.machine import MachineConfig  # noqa: E402
 MAX_POINTS = 20000
 
 
-def _derivatives(p_mm: np.ndarray, tick_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Central-difference v, a, j ``(n, n_axes)`` of positions ``(n, n_axes)`` (rest outside)."""
-    pad = np.concatenate([p_mm[:1].repeat(2, 0), p_mm, p_mm[-1:].repeat(2, 0)])
-    v = np.diff(pad, axis=0) * tick_hz
-    a = np.diff(v, axis=0) * tick_hz
-    j = np.diff(a, axis=0) * tick_hz
-    return v[1:-2], a[:-1], j
+def _series(table: TableFile, n_bins: int, chunk_rows: int = 1 << 20) -> dict[str, np.ndarray]:
+    """Per-bin min/max of v, a, j ``(n_bins, n_axes)`` and a decimated path, read chunk by chunk.
 
-
-def _envelope(t: np.ndarray, y: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    n = y.shape[0]
-    if n <= n_bins:
-        return t, y, y
-    edges = np.linspace(0, n, n_bins + 1).astype(int)
-    lo = np.minimum.reduceat(y, edges[:-1], axis=0)
-    hi = np.maximum.reduceat(y, edges[:-1], axis=0)
-    return t[edges[:-1]], lo, hi
+    At row k: ``v = (p_k - p_{k-1}) f``, ``a = (p_{k+1} - 2 p_k + p_{k-1}) f²``,
+    ``j = (p_{k+2} - 3 p_{k+1} + 3 p_k - p_{k-1}) f³``, with rest before and after the table.
+    Memory stays bounded by the chunk, so tables of any length can be plotted.
+    """
+    h = table.header
+    n, f = h.n_rows, h.tick_hz
+    b = max(1, -(-n // n_bins))
+    chunk = b * max(1, chunk_rows // b)
+    out: dict[str, list[np.ndarray]] = {k: [] for k in ("t", "p", "speed", "vlo", "vhi", "alo", "ahi", "jlo", "jhi")}
+    for start in range(0, n, chunk):
+        stop = min(n, start + chunk)
+        idx = np.clip(np.arange(start - 1, stop + 2), 0, n - 1)
+        p = table.exact_mm(int(idx[0]), int(idx[-1]) + 1)[idx - idx[0]]
+        v = np.diff(p, axis=0)[: stop - start] * f
+        a = np.diff(p, n=2, axis=0)[: stop - start] * f**2
+        j = np.diff(p, n=3, axis=0)[: stop - start] * f**3
+        edges = np.arange(0, stop - start, b)
+        for name, data in (("v", v), ("a", a), ("j", j)):
+            out[name + "lo"].append(np.minimum.reduceat(data, edges, axis=0))
+            out[name + "hi"].append(np.maximum.reduceat(data, edges, axis=0))
+        out["t"].append((start + edges) / f)
+        out["p"].append(p[1:-2][edges])
+        out["speed"].append(np.linalg.norm(v[edges], axis=1))
+    return {k: np.concatenate(v) for k, v in out.items()}
 
 
 def lit_mask(table: TableFile) -> np.ndarray:
@@ -62,21 +72,17 @@ def plot_table(
 ) -> Path:
     """Write a PNG: XY path coloured by speed (rapids dashed grey) and v/a/j per axis."""
     h = table.header
-    p = table.exact_mm()
-    t = np.arange(h.n_rows) / h.tick_hz
-    v, a, j = _derivatives(p, h.tick_hz)
-    speed = np.linalg.norm(v, axis=1)
-    lit = lit_mask(table)
+    ser = _series(table, MAX_POINTS)
+    lit = lit_mask(table)[(ser["t"] * h.tick_hz).round().astype(np.int64)]
     axes = h.axes
     fig = plt.figure(figsize=(15, 8.5), constrained_layout=True)
     gs = fig.add_gridspec(3, 2, width_ratios=[1.15, 1])
     ax_path = fig.add_subplot(gs[:, 0])
-    step = max(1, h.n_rows // (4 * MAX_POINTS))
     ix, iy = axes.index("x"), axes.index("y")
-    xy = p[::step][:, [ix, iy]]
+    xy = ser["p"][:, [ix, iy]]
     seg = np.stack([xy[:-1], xy[1:]], axis=1)
-    sp = speed[::step][:-1]
-    on = lit[::step][:-1]
+    sp = ser["speed"][:-1]
+    on = lit[:-1]
     lc = LineCollection(seg[on], array=sp[on], cmap="viridis", linewidths=1.6)
     ax_path.add_collection(lc)
     ax_path.add_collection(LineCollection(seg[~on], colors="0.6", linewidths=0.6, linestyles="--"))
@@ -84,18 +90,20 @@ def plot_table(
     ax_path.set_aspect("equal")
     ax_path.set_xlabel("X [mm]")
     ax_path.set_ylabel("Y [mm]")
-    ax_path.set_title(title or Path(h.meta.get("source", table.path.name)).name)
+    name = title or Path(h.meta.get("source", table.path.name)).name
+    ax_path.set_title(name if len(name) <= 60 else "…" + name[-59:])
     fig.colorbar(lc, ax=ax_path, label="path speed while cutting [mm/s]  (rapids: grey dashes)", shrink=0.7)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for row, (name, data, unit) in enumerate((("v", v, "mm/s"), ("a", a, "mm/s²"), ("j", j, "mm/s³"))):
+    moving = np.ptp(ser["p"], axis=0) > 0
+    for row, (name, unit) in enumerate((("v", "mm/s"), ("a", "mm/s²"), ("j", "mm/s³"))):
         ax = fig.add_subplot(gs[row, 1])
         for i, axis in enumerate(axes):
-            if np.ptp(p[:, i]) == 0:
+            if not moving[i]:
                 continue
-            tt, lo, hi = _envelope(t, data[:, i], MAX_POINTS)
+            lo, hi = ser[name + "lo"][:, i], ser[name + "hi"][:, i]
             c = colors[i % len(colors)]
-            ax.fill_between(tt, lo, hi, color=c, alpha=0.35, lw=0)
-            ax.plot(tt, (lo + hi) / 2 if tt.size < data.shape[0] else lo, color=c, lw=0.6, label=axis)
+            ax.fill_between(ser["t"], lo, hi, color=c, alpha=0.35, lw=0)
+            ax.plot(ser["t"], hi, color=c, lw=0.6, label=axis)
             if machine is not None and axis in machine.axis_names:
                 lim = {"v": machine.axis(axis).v_max, "a": machine.axis(axis).a_max, "j": machine.axis(axis).j_max}[
                     name
