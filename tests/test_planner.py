@@ -162,3 +162,19 @@ def test_random_programs_hold_every_limit_at_every_tick(tmp_path, steps, a, v, t
     nxt = np.append(job.plan.first_tick, job.plan.n_ticks)[ends_at_rest + 1]
     expected = np.round(job.spans.end[ends_at_rest][:, :2] / q).astype(np.int64)
     np.testing.assert_array_equal(table.positions[nxt][:, :2], expected)
+
+
+def test_time_law_s_of_t_and_its_speed():
+    from jaxcnc.planners.timelaw import sample_plan
+
+    m = make_machine(v=200, a=2000)
+    job = plan_text("G1 X30 F6000\nG3 X40 Y10 I0 J10\nG1 Y40\nG4 P0.1\nG1 X0 Y0\n", m)
+    ticks = np.arange(job.plan.n_ticks + 1)
+    seg, s, v = sample_plan(job.plan, ticks)
+    assert s[0] == 0.0 and s[-1] == pytest.approx(job.path_length_mm, abs=1e-9)
+    assert np.all(np.diff(s) >= -1e-12)  # never goes backwards
+    # the speed is the derivative of s: mean speed over each tick equals the mean of v at its ends
+    ds = np.diff(s) * m.tick_hz
+    np.testing.assert_allclose(ds, (v[1:] + v[:-1]) / 2, atol=2000 / m.tick_hz)
+    assert v.max() == pytest.approx(100.0, rel=1e-4)  # F6000 = 100 mm/s, reached on the long lines
+    assert np.all(v >= 0)

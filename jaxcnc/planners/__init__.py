@@ -6,6 +6,15 @@ Importing this package registers the built-in planners (``lookahead``).
 from jaxcnc.planners import trapezoid  # noqa: F401  (registers "lookahead")
 from jaxcnc.planners.job import PlannedJob, plan_job, program_start
 from jaxcnc.planners.registry import get_planner, planner_names, register_planner
-from jaxcnc.planners.timelaw import Plan
+from jaxcnc.planners.timelaw import Plan, sample_plan
 
-__all__ = ["Plan", "PlannedJob", "get_planner", "plan_job", "planner_names", "program_start", "register_planner"]
+__all__ = [
+    "Plan",
+    "PlannedJob",
+    "get_planner",
+    "plan_job",
+    "planner_names",
+    "program_start",
+    "register_planner",
+    "sample_plan",
+]

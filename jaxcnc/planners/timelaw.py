@@ -167,6 +167,31 @@ def s_at(
     return jnp.clip(s, 0.0, length[seg])
 
 
+def v_at(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
+    """Path speed (mm/s) on segment ``seg`` at integer ``tick`` (arrays ``(m,)``)."""
+    tau = jnp.maximum(((tick - plan["group_tick"][seg]).astype(jnp.float64) - plan["offset_ticks"][seg]) / tick_hz, 0)
+    ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
+    v_acc = plan["v0"][seg] + plan["a_acc"][seg] * jnp.minimum(tau, ta)
+    v_dec = plan["vp"][seg] - plan["a_dec"][seg] * jnp.clip(tau - ta - tc, 0.0, td)
+    return jnp.where(tau < ta, v_acc, v_dec)
+
+
+def sample_plan(plan: Plan, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The time law at integer ``ticks``: ``(segment, s_mm, v_mm_s)``, each ``(m,)``.
+
+    ``s_mm`` is the path length from the program start — the ``s(t)`` researchers compare
+    between planners; ``v_mm_s`` its derivative.
+    """
+    keys = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks")
+    arrays = {k: jnp.asarray(getattr(plan, k)) for k in keys}
+    t = jnp.asarray(np.asarray(ticks, dtype=np.int64))
+    seg = segment_of_tick(jnp.asarray(plan.first_tick), t)
+    length = jnp.asarray(plan.length)
+    s_local = s_at(arrays, length, seg, t, plan.tick_hz)
+    s0 = jnp.concatenate([jnp.zeros(1), jnp.cumsum(length)[:-1]])
+    return np.asarray(seg), np.asarray(s0[seg] + s_local), np.asarray(v_at(arrays, seg, t, plan.tick_hz))
+
+
 def segment_of_tick(first_tick: jnp.ndarray, tick: jnp.ndarray) -> jnp.ndarray:
     """Index of the segment that holds each tick: the last one whose first tick is ≤ it."""
     return jnp.clip(jnp.searchsorted(first_tick, tick, side="right") - 1, 0, first_tick.shape[0] - 1)
