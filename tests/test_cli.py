@@ -162,3 +162,10 @@ def test_unsupported_input_type(tmp_path, capsys):
     f.write_text("0\nEOF\n")
     assert main(["plan", str(f), "-m", str(EXAMPLE_MACHINE), "-o", str(tmp_path / "o.ticks")]) == 2
     assert "DXF input is not supported yet" in capsys.readouterr().err
+
+
+def test_unknown_planner(tmp_path, capsys):
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G1 X1 F60\n")
+    assert main(["plan", str(prog), "-m", str(EXAMPLE_MACHINE), "-o", str(tmp_path / "o.ticks"), "--planner", "x"]) == 2
+    assert "unknown planner 'x'; known: lookahead" in capsys.readouterr().err

@@ -43,6 +43,35 @@ FINE_SCALE = 2.0**32  # fine units per discrete
 # magic, version, n_axes, block_rows, flags, tick_hz, discrete_mm, n_rows, n_blocks, json_bytes,
 # n_events, events_crc, data_offset, events_offset; then the header CRC at byte 124.
 _HEADER = struct.Struct("<8sHHIIddQQIQIQQ")
+_FIELDS = (
+    "magic",
+    "version",
+    "n_axes",
+    "block_rows",
+    "flags",
+    "tick_hz",
+    "discrete_mm",
+    "n_rows",
+    "n_blocks",
+    "json_bytes",
+    "n_events",
+    "events_crc",
+    "data_offset",
+    "events_offset",
+)
+_HEADER_KEYS = (
+    "n_axes",
+    "block_rows",
+    "flags",
+    "tick_hz",
+    "discrete_mm",
+    "n_rows",
+    "n_blocks",
+    "n_events",
+    "events_crc",
+    "data_offset",
+    "events_offset",
+)
 assert _HEADER.size <= 124
 
 #: Event record: tick (int64), kind (uint32), aux (uint32: line, tool, laser mode), value (float64).
@@ -297,43 +326,21 @@ class TableFile:
             meta = json.loads(meta_raw.decode("utf-8"))
         except ValueError:
             raise self._err("header metadata is not valid JSON") from None
-        (
-            _,
-            _,
-            n_axes,
-            block_rows,
-            flags,
-            tick_hz,
-            discrete,
-            n_rows,
-            n_blocks,
-            _,
-            n_events,
-            events_crc,
-            data_offset,
-            events_offset,
-        ) = vals
-        self.header = h = TableHeader(
-            n_axes,
-            block_rows,
-            flags,
-            tick_hz,
-            discrete,
-            n_rows,
-            n_blocks,
-            n_events,
-            events_crc,
-            data_offset,
-            events_offset,
-            meta,
-        )
-        if n_axes < 1 or block_rows < 1 or n_blocks != -(-n_rows // block_rows) or tick_hz <= 0 or discrete <= 0:
+        f = dict(zip(_FIELDS, vals, strict=True))
+        self.header = h = TableHeader(**{k: f[k] for k in _HEADER_KEYS}, meta=meta)
+        n_axes, n_blocks, n_events, events_offset = h.n_axes, h.n_blocks, h.n_events, h.events_offset
+        if (
+            n_axes < 1
+            or h.block_rows < 1
+            or n_blocks != -(-h.n_rows // h.block_rows)
+            or min(h.tick_hz, h.discrete_mm) <= 0
+        ):
             raise self._err("inconsistent header fields")
         expected = events_offset + n_events * EVENT_DTYPE.itemsize
         if size != expected:
             raise self._err(f"file is {size} bytes, header says {expected} (truncated or extended)")
-        rows = n_blocks * block_rows
-        self._pos = np.memmap(self.path, dtype="<i4", mode="r", offset=data_offset, shape=(rows, n_axes))
+        rows = n_blocks * h.block_rows
+        self._pos = np.memmap(self.path, dtype="<i4", mode="r", offset=h.data_offset, shape=(rows, n_axes))
         self._fine = (
             np.memmap(self.path, dtype="<i4", mode="r", offset=h.fine_offset, shape=(rows, n_axes))
             if h.has_fine

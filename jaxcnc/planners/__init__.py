@@ -5,11 +5,12 @@ Importing this package registers the built-in planners (``lookahead``).
 
 from jaxcnc.planners import trapezoid  # noqa: F401  (registers "lookahead")
 from jaxcnc.planners.job import PlannedJob, plan_job, program_start
-from jaxcnc.planners.registry import get_planner, planner_names, register_planner
+from jaxcnc.planners.registry import PlanRequest, get_planner, planner_names, register_planner
 from jaxcnc.planners.timelaw import Plan, sample_plan
 
 __all__ = [
     "Plan",
+    "PlanRequest",
     "PlannedJob",
     "get_planner",
     "plan_job",

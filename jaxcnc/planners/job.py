@@ -14,7 +14,7 @@ import numpy as np
 from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
 from jaxcnc.machine import MachineConfig
-from jaxcnc.planners.registry import get_planner
+from jaxcnc.planners.registry import PlanRequest, get_planner
 from jaxcnc.planners.timelaw import Plan
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 
@@ -96,7 +96,8 @@ def plan_job(program: Program, machine: MachineConfig, planner: str = "lookahead
     lim = machine.limits(PROGRAM_AXES)
     v_max = np.where(np.isnan(lim["v_max"]), np.inf, lim["v_max"])
     a_max = np.where(np.isnan(lim["a_max"]), np.inf, lim["a_max"])
-    plan = get_planner(planner)(spans, feed, dwell, stop, v_max, a_max, machine)
+    request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine)
+    plan = get_planner(planner)(request)
     return PlannedJob(
         program=program,
         spans=spans,

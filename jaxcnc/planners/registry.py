@@ -1,37 +1,45 @@
 """Planners by name: the extension point for researchers' own velocity planners.
 
-A planner is a callable ``(spans, feeds) -> Plan`` given the machine, registered under a name
-that machine files and the command line can choose. See ``docs/planners.md``.
+A planner is a callable ``(PlanRequest) -> Plan`` registered under a name that the command line
+(``--planner``) and :func:`~jaxcnc.planners.plan_job` choose. See ``docs/planners.md``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from dataclasses import dataclass
 
 import numpy as np
 
+from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.spans import Spans
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.timelaw import Plan
 
 
-class Planner(Protocol):
-    def __call__(
-        self,
-        spans: Spans,
-        span_feed_mm_s: np.ndarray,
-        span_dwell_s: np.ndarray,
-        span_stop_before: np.ndarray,
-        axis_v_max: np.ndarray,
-        axis_a_max: np.ndarray,
-        machine: MachineConfig,
-    ) -> Plan:
-        """Plan the time law of ``spans`` (per-span programmed speed, dwell and forced stops;
-        axis limits of shape ``(3,)`` for x, y, z, ``inf`` where the machine lacks the axis)."""
-        ...
+@dataclass(frozen=True, eq=False)
+class PlanRequest:
+    """What a planner is asked to plan.
+
+    Attributes:
+        spans: the path.
+        feed_mm_s: ``(n,)`` programmed speed of each span (feed, or the rapid cap for G0).
+        dwell_s: ``(n,)`` dwell time of each (point) span.
+        stop_before: ``(n,)`` bool, the motion must be at rest where the span starts.
+        v_max, a_max: ``(3,)`` limits of the x, y, z axes (``inf`` where the machine lacks one).
+        machine: the machine (tick rate, tolerances, ...).
+    """
+
+    spans: Spans
+    feed_mm_s: np.ndarray
+    dwell_s: np.ndarray
+    stop_before: np.ndarray
+    v_max: np.ndarray
+    a_max: np.ndarray
+    machine: MachineConfig
 
 
+Planner = Callable[[PlanRequest], Plan]
 _PLANNERS: dict[str, Planner] = {}
 
 
@@ -49,7 +57,7 @@ def get_planner(name: str) -> Planner:
     try:
         return _PLANNERS[name]
     except KeyError:
-        raise KeyError(f"unknown planner {name!r}; known: {', '.join(sorted(_PLANNERS))}") from None
+        raise PlanningError(f"unknown planner {name!r}; known: {', '.join(sorted(_PLANNERS))}") from None
 
 
 def planner_names() -> list[str]:

@@ -13,11 +13,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.spans import SpanKind, Spans
-from jaxcnc.machine import MachineConfig
+from jaxcnc.geometry.spans import SpanKind
 from jaxcnc.planners.limits import NUMERIC_MARGIN, is_corner, junction_caps, span_caps
 from jaxcnc.planners.lookahead import lookahead
-from jaxcnc.planners.registry import register_planner
+from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
 
 MIN_BUCKET = 256
@@ -62,16 +61,9 @@ def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
 
 
 @register_planner("lookahead")
-def plan_lookahead(
-    spans: Spans,
-    span_feed_mm_s: np.ndarray,
-    span_dwell_s: np.ndarray,
-    span_stop_before: np.ndarray,
-    axis_v_max: np.ndarray,
-    axis_a_max: np.ndarray,
-    machine: MachineConfig,
-) -> Plan:
+def plan_lookahead(req: PlanRequest) -> Plan:
     """Plan with the whole-program trapezoidal look-ahead (see the module docstring)."""
+    spans, machine = req.spans, req.machine
     n = len(spans)
     m = bucket_size(n)
     args = (
@@ -80,15 +72,15 @@ def plan_lookahead(
         _pad(spans.radius, m, np.inf),
         _pad(spans.tangent_in, m, 0.0),
         _pad(spans.tangent_out, m, 0.0),
-        _pad(span_feed_mm_s, m, 0.0),
-        _pad(span_dwell_s, m, 0.0),
-        _pad(span_stop_before, m, True),
+        _pad(req.feed_mm_s, m, 0.0),
+        _pad(req.dwell_s, m, 0.0),
+        _pad(req.stop_before, m, True),
     )
     keep = 1.0 - NUMERIC_MARGIN
     out = plan_arrays(
         *args,
-        jnp.asarray(axis_v_max) * keep,
-        jnp.asarray(axis_a_max) * keep,
+        jnp.asarray(req.v_max) * keep,
+        jnp.asarray(req.a_max) * keep,
         machine.path.chord_tol_mm,
         machine.tick_hz,
     )
