@@ -7,11 +7,11 @@ the two parabolas: ``vp² = min(cap, (v0² + v1²)/2 + a L)``; the phase lengths
 times ``t = 2 L / (v_begin + v_end)`` per ramp, ``L_cru / vp`` for the cruise.
 
 Tick alignment. Between two junctions where the motion is at rest (a *group*: rest-to-rest
-motion, or a dwell) the time law is stretched by ``λ = ceil(T f) / (T f) ≥ 1`` so the group lasts
-a whole number of ticks. Stretching time by λ divides speeds by λ and accelerations by λ², so
-the limits still hold, and every rest point — every block that ends at rest — falls exactly on
-a tick. Time is kept as an int64 group start tick plus a float offset (in ticks) inside the
-group, so an hour at 100 kHz loses no precision.
+motion, or a dwell) the motion takes ``T`` seconds; the group is given ``ceil(T f)`` ticks and the
+machine simply stays at rest for the fraction of a tick left at its end. Every group therefore
+starts on a tick, every rest point — every block that ends at rest — is reached exactly on a
+tick, and speeds are exactly as planned (no stretching). Time is kept as an int64 group start
+tick plus a float offset (in ticks) inside the group, so an hour at 100 kHz loses no precision.
 """
 
 from __future__ import annotations
@@ -111,13 +111,13 @@ def _segmented_cumsum(values: jnp.ndarray, starts: jnp.ndarray) -> jnp.ndarray:
 
 
 def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_hz: float) -> dict[str, jnp.ndarray]:
-    """Stretch each rest-to-rest group to a whole number of ticks and place segments on the grid.
+    """Give each rest-to-rest group a whole number of ticks and place segments on the grid.
 
     Args:
         prof: output of :func:`trapezoids`.
         rest_start: ``(n,)`` bool, the motion is at rest at the start of the span (a group starts).
     Returns:
-        ``prof`` scaled, plus ``group_tick`` (int64), ``offset_ticks``, ``first_tick`` (int64) and
+        ``prof`` plus ``group_tick`` (int64), ``offset_ticks``, ``first_tick`` (int64) and
         ``n_ticks`` (scalar int64).
     """
     n = rest_start.shape[0]
@@ -127,16 +127,8 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
     # 1e-9 guards against ceil(5.000000000001) = 6 from rounding of the sums
     g_whole = jnp.ceil(g_ticks - 1e-9).astype(jnp.int64)
     g_whole = jnp.maximum(g_whole, 0)
-    lam = jnp.where(g_ticks > 0, g_whole / jnp.where(g_ticks > 0, g_ticks, 1.0), 1.0)
-    lam_k = jnp.maximum(lam[group], 1.0)
     out = dict(prof)
-    for key in ("t_acc", "t_cru", "t_dec"):
-        out[key] = prof[key] * lam_k
-    for key in ("v0", "vp", "v1"):
-        out[key] = prof[key] / lam_k
-    for key in ("a_acc", "a_dec"):
-        out[key] = prof[key] / lam_k**2
-    dur = dur_ticks * lam_k
+    dur = dur_ticks
     g_start = jnp.cumsum(g_whole) - g_whole
     offset = jnp.where(rest_start, 0.0, _segmented_cumsum(dur, rest_start) - dur)  # exclusive, exact 0 at starts
     out["group_tick"] = g_start[group]
