@@ -24,6 +24,7 @@ class Kind(IntEnum):
     ARC = 2  # circular arc in the row's plane, G2/G3
     DWELL = 3  # stand still for ``dwell_s`` seconds, G4
     EVENT = 4  # a machine event at rest: see :class:`Event`
+    CURVE = 5  # a (rational) B-spline: row ``curve`` of :attr:`Program.curves` (G5, G5.1, NURBS)
 
 
 class Event(IntEnum):
@@ -40,6 +41,81 @@ class LaserMode(IntEnum):
     OFF = 0  # M5
     CONSTANT = 3  # M3: constant power
     DYNAMIC = 4  # M4: power scaled with speed (laser mode of GRBL-like controllers)
+
+
+@dataclass(frozen=True, eq=False)
+class CurveTable:
+    """The (rational) B-spline curves of a program, as ragged arrays.
+
+    Curve ``i`` has degree ``degree[i]``, control points ``points[cp[i]:cp[i+1]]`` (``(m, 3)`` mm)
+    with weights ``weights[cp[i]:cp[i+1]]`` and knots ``knots[kn[i]:kn[i+1]]`` (``m + degree + 1`` of
+    them, clamped: the curve starts at its first control point and ends at its last). Splines of
+    every dialect (G5 cubics, G5.1 quadratics, G5.2/G6.2/BSPLINE NURBS) are stored this way.
+    """
+
+    degree: np.ndarray
+    cp: np.ndarray
+    points: np.ndarray
+    weights: np.ndarray
+    kn: np.ndarray
+    knots: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.degree.shape[0])
+
+    def curve(self, i: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+        """``(degree, points, weights, knots)`` of curve ``i``."""
+        a, b = self.cp[i], self.cp[i + 1]
+        return int(self.degree[i]), self.points[a:b], self.weights[a:b], self.knots[self.kn[i] : self.kn[i + 1]]
+
+
+def make_curve_table(curves: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]) -> CurveTable:
+    """Pack ``(degree, points (m, 2 or 3), weights (m,), knots (m+degree+1,))`` tuples, checking them.
+
+    Raises ``ValueError`` naming the curve and what is wrong (the front ends turn it into a located
+    error).
+    """
+    deg, pts, wts, kns = [], [], [], []
+    for i, (p, points, weights, knots) in enumerate(curves):
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] not in (2, 3):
+            raise ValueError(f"curve {i}: control points must be (m, 2) or (m, 3)")
+        if points.shape[1] == 2:
+            points = np.concatenate([points, np.zeros((points.shape[0], 1))], axis=1)
+        weights = np.asarray(weights, dtype=np.float64)
+        knots = np.asarray(knots, dtype=np.float64)
+        m = points.shape[0]
+        if not 1 <= p <= 7:
+            raise ValueError(f"curve {i}: degree {p} is outside 1..7")
+        if m < p + 1:
+            raise ValueError(f"curve {i}: degree {p} needs at least {p + 1} control points, got {m}")
+        if weights.shape != (m,) or not np.all(weights > 0) or not np.all(np.isfinite(weights)):
+            raise ValueError(f"curve {i}: needs {m} positive finite weights")
+        if knots.shape != (m + p + 1,):
+            raise ValueError(f"curve {i}: needs {m + p + 1} knots for {m} control points of degree {p}, got {knots.size}")
+        if not np.all(np.isfinite(points)) or not np.all(np.isfinite(knots)):
+            raise ValueError(f"curve {i}: control points and knots must be finite")
+        if np.any(np.diff(knots) < 0):
+            raise ValueError(f"curve {i}: knots must not decrease")
+        if np.any(knots[: p + 1] != knots[0]) or np.any(knots[-p - 1 :] != knots[-1]) or knots[-1] <= knots[0]:
+            raise ValueError(f"curve {i}: knots must be clamped (first and last repeated {p + 1} times)")
+        inner = knots[p + 1 : m]
+        if inner.size and np.max(np.unique(inner, return_counts=True)[1]) > p:
+            raise ValueError(f"curve {i}: an interior knot repeats more than the degree {p} (the curve breaks)")
+        deg.append(p)
+        pts.append(points)
+        wts.append(weights)
+        kns.append(knots)
+    offsets = np.concatenate([[0], np.cumsum([len(w) for w in wts])]).astype(np.int64)
+    k_offsets = np.concatenate([[0], np.cumsum([len(k) for k in kns])]).astype(np.int64)
+    return CurveTable(
+        degree=np.asarray(deg, np.int8),
+        cp=offsets,
+        points=np.concatenate(pts) if pts else np.zeros((0, 3)),
+        weights=np.concatenate(wts) if wts else np.zeros(0),
+        kn=k_offsets,
+        knots=np.concatenate(kns) if kns else np.zeros(0),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,7 +139,9 @@ class Program:
             0 = G61 exact path).
         event, event_value: ``(n,)`` int8 :class:`Event` and its value (tool number).
         line: ``(n,)`` int32 1-based source line of the block.
+        curve: ``(n,)`` int32 row of :attr:`curves` for CURVE rows, -1 otherwise.
         file: the source's name.
+        curves: the program's spline curves, or ``None``.
     """
 
     kind: np.ndarray
@@ -82,7 +160,9 @@ class Program:
     event: np.ndarray
     event_value: np.ndarray
     line: np.ndarray
+    curve: np.ndarray
     file: str = "<memory>"
+    curves: CurveTable | None = None
 
     def __len__(self) -> int:
         return int(self.kind.shape[0])
@@ -94,7 +174,7 @@ class Program:
     @property
     def is_motion(self) -> np.ndarray:
         """``(n,)`` bool: rows that move the tool."""
-        return (self.kind == Kind.LINE) | (self.kind == Kind.ARC)
+        return (self.kind == Kind.LINE) | (self.kind == Kind.ARC) | (self.kind == Kind.CURVE)
 
     def uses_axis(self, axis: int) -> bool:
         """True when some row moves axis ``axis`` (column index) or stands away from the start."""
@@ -120,6 +200,7 @@ _DTYPES = {
     "event": np.int8,
     "event_value": np.int32,
     "line": np.int32,
+    "curve": np.int32,
 }
 _DEFAULTS = {
     "center": np.nan,
@@ -135,10 +216,11 @@ _DEFAULTS = {
     "event": 0,
     "event_value": 0,
     "line": 0,
+    "curve": -1,
 }
 
 
-def program_from_columns(file: str = "<memory>", **cols: np.ndarray) -> Program:
+def program_from_columns(file: str = "<memory>", curves: CurveTable | None = None, **cols: np.ndarray) -> Program:
     """Build a Program from column arrays; omitted columns take their defaults.
 
     ``kind``, ``start`` and ``end`` are required. This is how synthetic programs (benchmarks,
@@ -147,7 +229,7 @@ def program_from_columns(file: str = "<memory>", **cols: np.ndarray) -> Program:
     n = int(np.asarray(cols["kind"]).shape[0])
     out = {}
     for f in fields(Program):
-        if f.name == "file":
+        if f.name in ("file", "curves"):
             continue
         dt = _DTYPES[f.name]
         width = (n, 3) if f.name in ("start", "end", "center") else (n,)
@@ -159,4 +241,4 @@ def program_from_columns(file: str = "<memory>", **cols: np.ndarray) -> Program:
             a = np.full(width, _DEFAULTS[f.name], dtype=dt)
         a.setflags(write=False)
         out[f.name] = a
-    return Program(file=file, **out)
+    return Program(file=file, curves=curves, **out)

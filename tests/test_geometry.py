@@ -18,9 +18,18 @@ def spans_of(text: str):
     return build_spans(parse_gcode(text, "g.ngc"))
 
 
+def span_dict(spans):
+    keys = ("kind", "length", "radius", "half_angle", "cheb_s", "cheb_u", "coeffs", "origin")
+    return {k: jnp.asarray(getattr(spans, k)) for k in keys}
+
+
 def at_s(spans, idx: np.ndarray, s: np.ndarray, order: int = 0):
-    u = u_of_s(jnp.asarray(spans.kind[idx]), spans.length[idx], spans.radius[idx], spans.half_angle[idx], s)
-    return u, [np.asarray(a) for a in evaluate(jnp.asarray(spans.coeffs[idx]), u, order)]
+    u = u_of_s(span_dict(spans), jnp.asarray(idx), jnp.asarray(s))
+    return u, [np.asarray(a) for a in evaluate(jnp.asarray(spans.coeffs[idx]), spans.origin[idx], u, order)]
+
+
+def ev(spans, idx, u, order=0):
+    return evaluate(jnp.asarray(spans.coeffs[idx]), jnp.asarray(spans.origin[idx]), jnp.asarray(u), order)
 
 
 def test_arcs_split_at_90_degrees_with_exact_lengths():
@@ -81,13 +90,13 @@ def test_derivatives_match_analytic_circle():
     # compare with central differences in u
     h = 1e-6
     uu = np.asarray(u)
-    _, (pp,) = (None, evaluate(jnp.asarray(sp.coeffs[idx]), jnp.clip(uu + h, 0, 1)))
-    _, (pm,) = (None, evaluate(jnp.asarray(sp.coeffs[idx]), jnp.clip(uu - h, 0, 1)))
+    (pp,) = ev(sp, idx, np.clip(uu + h, 0, 1))
+    (pm,) = ev(sp, idx, np.clip(uu - h, 0, 1))
     inner = (uu > 2 * h) & (uu < 1 - 2 * h)
     fd1 = (np.asarray(pp) - np.asarray(pm)) / (2 * h)
     np.testing.assert_allclose(d1[inner], fd1[inner], rtol=1e-6, atol=1e-6)
-    _, (p1,) = (None, evaluate(jnp.asarray(sp.coeffs[idx]), jnp.clip(uu + 1e-4, 0, 1)))
-    _, (p0,) = (None, evaluate(jnp.asarray(sp.coeffs[idx]), jnp.clip(uu - 1e-4, 0, 1)))
+    (p1,) = ev(sp, idx, np.clip(uu + 1e-4, 0, 1))
+    (p0,) = ev(sp, idx, np.clip(uu - 1e-4, 0, 1))
     fd2 = (np.asarray(p1) - 2 * p + np.asarray(p0)) / 1e-8
     inner = (uu > 2e-4) & (uu < 1 - 2e-4)
     np.testing.assert_allclose(d2[inner], fd2[inner], rtol=1e-4, atol=1e-4 * np.abs(d2).max())
@@ -125,12 +134,12 @@ def test_points_for_dwell_and_events_zero_moves_dropped():
     np.testing.assert_array_equal(sp.start[1], [5, 0, 0])
 
 
-@pytest.mark.parametrize("order", [0, 1, 2])
+@pytest.mark.parametrize("order", [0, 1, 2, 3])
 def test_evaluate_is_batched_and_jittable(order):
     import jax
 
     sp = spans_of("G1 X1 F60\nG3 X0 Y1 I-1 J0\n")
-    f = jax.jit(lambda c, u: evaluate(c, u, order))
-    out = f(jnp.asarray(sp.coeffs[[0, 1, 1]]), jnp.array([0.5, 0.0, 1.0]))
+    f = jax.jit(lambda c, o, u: evaluate(c, o, u, order))
+    out = f(jnp.asarray(sp.coeffs[[0, 1, 1]]), jnp.asarray(sp.origin[[0, 1, 1]]), jnp.array([0.5, 0.0, 1.0]))
     assert len(out) == order + 1 and out[0].shape == (3, 3)
     np.testing.assert_allclose(np.asarray(out[0][2]), [0, 1, 0], atol=1e-15)

@@ -1,11 +1,12 @@
 """Batched evaluation of rational spans: position and derivatives with respect to ``u``.
 
-For ``[N, w](u) = sum_k c_k u^k`` and ``P = N / w`` the quotient rule gives
+For ``[N, w](u) = sum_k c_k u^k`` and ``P = origin + N / w`` the quotient rule gives
 
-    P'  = (N'  - P w') / w
-    P'' = (N'' - 2 P' w' - P w'') / w
+    P'   = (N'   - Q w') / w                                   (Q = N / w)
+    P''  = (N''  - 2 P' w' - Q w'') / w
+    P''' = (N''' - 3 P'' w' - 3 P' w'' - Q w''') / w
 
-All functions are pure and shape-polymorphic in the leading batch axis, so they ``vmap``/``jit``
+All functions are pure and batched over a leading axis of queries, so they ``vmap``/``jit``
 cleanly and run unchanged on CPU or GPU.
 """
 
@@ -20,10 +21,10 @@ def _power_derivatives(c: jnp.ndarray, u: jnp.ndarray, order: int) -> list[jnp.n
     """``[H, H', ..., H^(order)]`` of ``H(u) = sum_k c_k u^k``.
 
     Args:
-        c: ``(m, degree+1, ndim+1)`` coefficients, one span per query.
+        c: ``(m, degree+1, 4)`` coefficients, one span per query.
         u: ``(m,)`` parameters.
     Returns:
-        ``order+1`` arrays of shape ``(m, ndim+1)``.
+        ``order+1`` arrays of shape ``(m, 4)``.
     """
     deg = c.shape[-2] - 1
     k = jnp.arange(deg + 1, dtype=c.dtype)
@@ -37,26 +38,26 @@ def _power_derivatives(c: jnp.ndarray, u: jnp.ndarray, order: int) -> list[jnp.n
     return out
 
 
-def evaluate(coeffs: jnp.ndarray, u: jnp.ndarray, order: int = 0) -> tuple[jnp.ndarray, ...]:
-    """Position (and derivatives up to ``order`` ≤ 2) of rational spans.
+def evaluate(coeffs: jnp.ndarray, origin: jnp.ndarray, u: jnp.ndarray, order: int = 0) -> tuple[jnp.ndarray, ...]:
+    """Position and derivatives up to ``order`` (≤ 3) of rational spans at ``u``.
 
     Args:
-        coeffs: ``(m, degree+1, ndim+1)`` homogeneous power-basis coefficients, gathered
-            per query (``spans.coeffs[span_index]``).
+        coeffs: ``(m, degree+1, 4)`` homogeneous power-basis coefficients gathered per query
+            (``spans.coeffs[span_index]``); origin: ``(m, 3)`` (``spans.origin[span_index]``).
         u: ``(m,)`` parameters in [0, 1].
-        order: 0 → ``(P,)``; 1 → ``(P, P')``; 2 → ``(P, P', P'')``. Each ``(m, ndim)``.
+    Returns:
+        ``(P, P', ..., P^(order))``, each ``(m, 3)``; ``P`` in mm, derivatives per unit ``u``.
     """
-    if not 0 <= order <= 2:
-        raise ValueError("order must be 0, 1 or 2")
+    if not 0 <= order <= 3:
+        raise ValueError("order must be 0, 1, 2 or 3")
     h = _power_derivatives(coeffs, u, order)
-    w = h[0][:, -1:]
-    p = h[0][:, :-1] / w
-    out = [p]
+    w = [x[:, 3:] for x in h]
+    q = h[0][:, :3] / w[0]
+    d = [q]
     if order >= 1:
-        w1 = h[1][:, -1:]
-        p1 = (h[1][:, :-1] - p * w1) / w
-        out.append(p1)
+        d.append((h[1][:, :3] - q * w[1]) / w[0])
     if order >= 2:
-        w2 = h[2][:, -1:]
-        out.append((h[2][:, :-1] - 2.0 * p1 * w1 - p * w2) / w)
-    return tuple(out)
+        d.append((h[2][:, :3] - 2.0 * d[1] * w[1] - q * w[2]) / w[0])
+    if order >= 3:
+        d.append((h[3][:, :3] - 3.0 * d[2] * w[1] - 3.0 * d[1] * w[2] - q * w[3]) / w[0])
+    return (origin + q, *d[1:])

@@ -1,17 +1,21 @@
 """Blocks as rational Bézier spans in homogeneous power basis.
 
-Every motion block becomes one or more spans ``P(u) = N(u) / w(u)`` for ``u`` in [0, 1], with
-``[N, w](u) = sum_k c_k u^k`` — the coefficients ``c`` of shape ``(n_spans, degree+1, ndim+1)``
-(homogeneous coordinates ``(w·x, w·y, w·z, w)``). One representation serves every block kind,
-so evaluation is one batched kernel:
+Every motion block becomes one or more spans ``P(u) = origin + N(u) / w(u)`` for ``u`` in [0, 1],
+with ``[N, w](u) = sum_k c_k u^k`` — coefficients of shape ``(n_spans, degree+1, 4)``, relative
+to each span's origin (see :mod:`jaxcnc.geometry.bezier`). One representation serves every block
+kind, so evaluation is one batched kernel:
 
-* a line is degree 1 (padded to the common degree, which keeps its uniform parametrisation);
-* a circular arc is split into pieces of at most 90° and each piece is the *exact* rational
-  quadratic with end weights 1 and middle weight ``cos(φ/2)`` (φ the piece's sweep);
+* a line is degree 1, padded to the common degree (which keeps ``u`` proportional to length);
+* a circular arc is split into pieces of at most 90°, each the *exact* rational quadratic with
+  middle weight ``cos(φ/2)`` (φ the piece's sweep);
+* a B-spline or NURBS (G5 cubic, G5.1 quadratic, G5.2/G6.2/BSPLINE NURBS, degree ≤ 7) is cut at
+  its knots into rational Bézier pieces, which are subdivided until their length is certified and
+  their ``s(u)``/``u(s)`` fits converge (:mod:`jaxcnc.geometry.arclength`);
 * a dwell or machine event is a point span (zero length), so the planner's time line has a
   segment for it.
 
-Building is vectorised NumPy over blocks (no Python loop over blocks or points).
+The common degree is bucketed (2, 3, 5 or 7: the smallest that holds the program's curves) so
+programs of similar content share compiled kernels. Building is vectorised NumPy over blocks.
 """
 
 from __future__ import annotations
@@ -21,10 +25,13 @@ from enum import IntEnum
 
 import numpy as np
 
+from jaxcnc.geometry.arclength import CHEB_N, derivatives, refine_curved
+from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
+from jaxcnc.geometry.curvature import curvature_max, extents
 from jaxcnc.program import Kind, Program
 
-#: Common degree of all spans so far (lines and arcs); the NURBS issue adds buckets.
-DEGREE = 2
+#: Span degrees are bucketed to these values.
+DEGREE_BUCKETS = (2, 3, 5, 7)
 #: Motion rows shorter than this (mm) move nothing and produce no span.
 MIN_LENGTH_MM = 1e-9
 
@@ -33,6 +40,7 @@ class SpanKind(IntEnum):
     POINT = 0  # dwell or event: zero length
     LINE = 1
     ARC = 2
+    CURVE = 3  # a piece of a B-spline / NURBS
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,57 +48,63 @@ class Spans:
     """The path as spans; every array has ``n_spans`` rows (in path order).
 
     Attributes:
-        coeffs: ``(n, DEGREE+1, 4)`` homogeneous power-basis coefficients.
+        coeffs: ``(n, degree+1, 4)`` homogeneous power-basis coefficients relative to ``origin``.
+        origin: ``(n, 3)`` mm.
         kind: ``(n,)`` int8 :class:`SpanKind`.
-        length: ``(n,)`` mm, exact arc length of the span.
-        radius: ``(n,)`` mm, arc radius (``inf`` for lines and points).
+        length: ``(n,)`` mm, arc length (exact for lines and arcs, certified quadrature for curves).
+        length_err: ``(n,)`` mm, bound on the length's error (0 for lines and arcs).
+        radius: ``(n,)`` mm, arc radius (``inf`` otherwise).
         half_angle: ``(n,)`` rad, half of an arc span's sweep (0 otherwise).
-        tangent_in, tangent_out: ``(n, 3)`` unit tangents at ``u = 0`` and ``u = 1``
-            (zero for points).
-        lo, hi: ``(n, 3)`` mm, the span's exact axis-aligned extent.
+        kappa_max: ``(n,)`` 1/mm, maximum curvature over the span.
+        tangent_in, tangent_out: ``(n, 3)`` unit tangents at ``u = 0`` and ``u = 1`` (0 for points).
+        lo, hi: ``(n, 3)`` mm, the span's axis-aligned extent.
         block: ``(n,)`` int32 index of the Program row the span comes from.
+        cheb_s: ``(n, CHEB_N+1)`` Chebyshev series of ``s(x)``, ``x = 2u - 1`` (curves; width 0 when
+            the program has no curves).
+        cheb_u: ``(n, CHEB_N)`` Chebyshev series of ``u(y)``, ``y = 2 s / length - 1`` (curves).
     """
 
     coeffs: np.ndarray
+    origin: np.ndarray
     kind: np.ndarray
     length: np.ndarray
+    length_err: np.ndarray
     radius: np.ndarray
     half_angle: np.ndarray
+    kappa_max: np.ndarray
     tangent_in: np.ndarray
     tangent_out: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
     block: np.ndarray
+    cheb_s: np.ndarray
+    cheb_u: np.ndarray
 
     def __len__(self) -> int:
         return int(self.kind.shape[0])
 
     @property
+    def degree(self) -> int:
+        return int(self.coeffs.shape[1] - 1)
+
+    @property
     def start(self) -> np.ndarray:
         """``(n, 3)`` start points (``u = 0``)."""
         c = self.coeffs[:, 0, :]
-        return c[:, :3] / c[:, 3:]
+        return self.origin + c[:, :3] / c[:, 3:]
 
     @property
     def end(self) -> np.ndarray:
         """``(n, 3)`` end points (``u = 1``)."""
         c = self.coeffs.sum(axis=1)
-        return c[:, :3] / c[:, 3:]
+        return self.origin + c[:, :3] / c[:, 3:]
 
 
-def _homogeneous_power(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, w1: np.ndarray) -> np.ndarray:
-    """Quadratic rational Bézier (end weights 1, middle ``w1``) in homogeneous power basis.
-
-    ``B(u) = (1-u)² P0 + 2u(1-u) P1 + u² P2 = P0 + 2(P1 - P0) u + (P0 - 2 P1 + P2) u²``,
-    applied to the homogeneous points ``(P0, 1)``, ``(w1 P1, w1)``, ``(P2, 1)``.
-
-    Args: ``p0, p1, p2`` of shape ``(m, 3)``, ``w1`` of shape ``(m,)``. Returns ``(m, 3, 4)``.
-    """
-    ones = np.ones_like(w1)[:, None]
-    h0 = np.concatenate([p0, ones], axis=1)
-    h1 = np.concatenate([p1 * w1[:, None], w1[:, None]], axis=1)
-    h2 = np.concatenate([p2, ones], axis=1)
-    return np.stack([h0, 2.0 * (h1 - h0), h0 - 2.0 * h1 + h2], axis=1)
+def _quadratic(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, w1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Quadratic rational Bézier (end weights 1, middle ``w1``): relative coefficients and origin."""
+    pts = np.stack([p0, p1, p2], axis=1)
+    w = np.stack([np.ones_like(w1), w1, np.ones_like(w1)], axis=1)
+    return homogeneous_power(pts, w, p0), p0.copy()
 
 
 def _line_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -98,18 +112,10 @@ def _line_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     d = b - a
     length = np.linalg.norm(d, axis=1)
     t = d / length[:, None]
-    return dict(
-        coeffs=_homogeneous_power(a, (a + b) / 2, b, np.ones(len(rows))),
-        kind=SpanKind.LINE,
-        length=length,
-        radius=np.inf,
-        half_angle=0.0,
-        tangent_in=t,
-        tangent_out=t,
-        lo=np.minimum(a, b),
-        hi=np.maximum(a, b),
-        block=rows,
-    )
+    coeffs, origin = _quadratic(a, (a + b) / 2, b, np.ones(len(rows)))
+    return dict(coeffs=coeffs, origin=origin, kind=SpanKind.LINE, length=length, radius=np.inf,
+                half_angle=0.0, kappa_max=0.0, tangent_in=t, tangent_out=t, lo=np.minimum(a, b),
+                hi=np.maximum(a, b), block=rows)
 
 
 def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -158,35 +164,59 @@ def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
         ext = cc + rr[:, None] * np.array([dx, dy, 0.0])
         lo = np.where(inside[:, None], np.minimum(lo, ext), lo)
         hi = np.where(inside[:, None], np.maximum(hi, ext), hi)
-    return dict(
-        coeffs=_homogeneous_power(p0, p1, p2, w1),
-        kind=SpanKind.ARC,
-        length=rr * phi,
-        radius=rr,
-        half_angle=phi / 2,
-        tangent_in=tangent(a0),
-        tangent_out=tangent(a1),
-        lo=lo,
-        hi=hi,
-        block=rows[idx],
-    )
+    coeffs, origin = _quadratic(p0, p1, p2, w1)
+    return dict(coeffs=coeffs, origin=origin, kind=SpanKind.ARC, length=rr * phi, radius=rr, half_angle=phi / 2,
+                kappa_max=1.0 / rr, tangent_in=tangent(a0), tangent_out=tangent(a1), lo=lo, hi=hi, block=rows[idx])
+
+
+def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    f = np.linalg.norm(fallback, axis=1, keepdims=True)
+    use = n > 1e-12
+    return np.where(use, v / np.where(use, n, 1.0), fallback / np.where(f > 0, f, 1.0))
+
+
+def _curve_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndarray]:
+    """B-spline / NURBS rows → certified rational Bézier pieces."""
+    coeffs, origin, owner = [], [], []
+    for r in rows:
+        deg, pts, wts, kns = p.curves.curve(int(p.curve[r]))
+        bp, bw, _ = nurbs_to_bezier(deg, pts, wts, kns)
+        moving = np.ptp(bp, axis=1).max(axis=1) > MIN_LENGTH_MM  # drop pieces that do not move
+        bp, bw = bp[moving], bw[moving]
+        coeffs.append(elevate(homogeneous_power(bp, bw, bp[:, 0]), degree))
+        origin.append(bp[:, 0])
+        owner.append(np.full(bp.shape[0], r))
+    fit = refine_curved(np.concatenate(coeffs), np.concatenate(origin), np.concatenate(owner))
+    c = fit["coeffs"]
+    _, d1_0, d2_0 = (x[:, 0] for x in derivatives(c, np.zeros((c.shape[0], 1)), 2))
+    _, d1_1, d2_1 = (x[:, 0] for x in derivatives(c, np.ones((c.shape[0], 1)), 2))
+    lo, hi = extents(c, fit["origin"])
+    return dict(coeffs=c, origin=fit["origin"], kind=SpanKind.CURVE, length=fit["length"],
+                length_err=fit["length_err"], radius=np.inf, half_angle=0.0, kappa_max=curvature_max(c),
+                tangent_in=_unit(d1_0, d2_0), tangent_out=_unit(d1_1, -d2_1), lo=lo, hi=hi, block=fit["owner"],
+                cheb_s=fit["cheb_s"], cheb_u=fit["cheb_u"])
 
 
 def _point_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     a = p.end[rows]
     z = np.zeros_like(a)
-    return dict(
-        coeffs=_homogeneous_power(a, a, a, np.ones(len(rows))),
-        kind=SpanKind.POINT,
-        length=0.0,
-        radius=np.inf,
-        half_angle=0.0,
-        tangent_in=z,
-        tangent_out=z,
-        lo=a,
-        hi=a,
-        block=rows,
-    )
+    coeffs, origin = _quadratic(a, a, a, np.ones(len(rows)))
+    return dict(coeffs=coeffs, origin=origin, kind=SpanKind.POINT, length=0.0, radius=np.inf, half_angle=0.0,
+                kappa_max=0.0, tangent_in=z, tangent_out=z, lo=a, hi=a, block=rows)
+
+
+def span_degree(program: Program) -> int:
+    """The bucketed common degree for a program's spans."""
+    need = 2
+    if program.curves is not None and np.any(program.kind == Kind.CURVE):
+        used = program.curve[program.kind == Kind.CURVE]
+        need = max(need, int(np.max(program.curves.degree[used])))
+    return next(d for d in DEGREE_BUCKETS if d >= need)
+
+
+_KEYS = ("coeffs", "origin", "kind", "length", "length_err", "radius", "half_angle", "kappa_max", "tangent_in",
+         "tangent_out", "lo", "hi", "block", "cheb_s", "cheb_u")
 
 
 def build_spans(program: Program) -> Spans:
@@ -195,41 +225,36 @@ def build_spans(program: Program) -> Spans:
     Zero-length moves produce no span; dwell and event rows produce point spans.
     """
     kind = program.kind
+    degree = span_degree(program)
+    has_curves = bool(np.any(kind == Kind.CURVE))
+    n_cheb = (CHEB_N + 1, CHEB_N) if has_curves else (0, 0)
     move_len = np.linalg.norm(program.end - program.start, axis=1)
     is_line = (kind == Kind.LINE) & (move_len > MIN_LENGTH_MM)
-    is_arc = kind == Kind.ARC
-    is_point = (kind == Kind.DWELL) | (kind == Kind.EVENT)
-    parts = [
-        f(program, np.flatnonzero(m))
-        for f, m in ((_line_spans, is_line), (_arc_spans, is_arc), (_point_spans, is_point))
-        if m.any()
-    ]
+    parts = []
+    for build, mask in ((_line_spans, is_line), (_arc_spans, kind == Kind.ARC), (_point_spans,
+                        (kind == Kind.DWELL) | (kind == Kind.EVENT))):
+        if mask.any():
+            parts.append(build(program, np.flatnonzero(mask)))
+    if has_curves:
+        parts.append(_curve_spans(program, np.flatnonzero(kind == Kind.CURVE), degree))
     if not parts:
-        empty = np.zeros((0, 3))
-        return Spans(
-            np.zeros((0, DEGREE + 1, 4)),
-            np.zeros(0, np.int8),
-            np.zeros(0),
-            np.zeros(0),
-            np.zeros(0),
-            empty,
-            empty,
-            empty,
-            empty,
-            np.zeros(0, np.int32),
-        )
-    n_of = [len(np.atleast_1d(pt["block"])) for pt in parts]
+        parts.append(_point_spans(program, np.zeros(0, np.int64)))
     cols = {}
-    for key in ("coeffs", "kind", "length", "radius", "half_angle", "tangent_in", "tangent_out", "lo", "hi", "block"):
-        cols[key] = np.concatenate(
-            [
-                np.broadcast_to(np.asarray(pt[key]), (n,) + np.shape(pt[key])[1:])
-                if np.ndim(pt[key]) == 0
-                else np.asarray(pt[key])
-                for pt, n in zip(parts, n_of, strict=False)
-            ]
-        )
-    # Path order: by program row, then by piece order within an arc (stable sort keeps it).
+    for key in _KEYS:
+        chunks = []
+        for pt in parts:
+            n = np.size(pt["block"])
+            v = pt.get(key, 0.0)
+            if key == "coeffs":
+                v = elevate(v, degree)
+            elif key in ("cheb_s", "cheb_u"):
+                width = n_cheb[0] if key == "cheb_s" else n_cheb[1]
+                v = v if np.ndim(v) == 2 else np.zeros((n, width))
+            elif np.ndim(v) == 0:
+                v = np.full(n, v)
+            chunks.append(np.asarray(v))
+        cols[key] = np.concatenate(chunks)
+    # Path order: by program row, then by piece order within a block (stable sort keeps it).
     order = np.argsort(cols["block"], kind="stable")
     out = {k: np.ascontiguousarray(v[order]) for k, v in cols.items()}
     out["kind"] = out["kind"].astype(np.int8)

@@ -13,15 +13,16 @@ difference by ``a_max``. Spans between exact stops or exactly tangent junctions 
 Lines. With unit direction ``e``, axis ``i`` moves at ``v·e_i`` and accelerates at ``a_t·e_i``:
 ``v ≤ min_i v_max_i / |e_i|`` and ``a_t ≤ min_i a_i / |e_i|`` (``a_i`` the smooth budget).
 
-Arcs (XY plane, radius r). Axis acceleration is ``a_t T_i + (v²/r) N_i`` with ``T``, ``N`` the unit
-tangent and normal; as ``T_x² + N_x² = T_y² + N_y² = 1`` in the plane, Cauchy–Schwarz gives
-``|a_i| ≤ sqrt(a_t² + a_n²)``. The speed is capped so that the centripetal part uses at most
-``ARC_NORMAL_SHARE`` of ``A = min(a_x, a_y)``: ``v² ≤ ARC_NORMAL_SHARE · A · r``; the tangential
-budget is what remains at the cap speed, ``a_t = sqrt(A² - (v_cap²/r)²)``.
+Curved spans (arcs, B-spline pieces; maximum curvature κ). The acceleration is
+``a_t T + v² κ(u) N`` with ``T ⊥ N`` unit vectors, so every axis component obeys
+``|a_i| ≤ sqrt(a_t² + (v² κ)²)`` and ``|v_i| ≤ v``. The speed is capped so that the centripetal
+part uses at most ``ARC_NORMAL_SHARE`` of ``A`` (the smallest acceleration among the axes the
+span moves): ``v² ≤ ARC_NORMAL_SHARE · A / κ``; the tangential budget is what remains at the cap
+speed, ``a_t = sqrt(A² - (v_cap² κ)²)``.
 
-Chord error. Drives interpolate linearly between ticks; a chord subtending ``Δθ`` on radius r has
-sagitta ``r (1 - cos(Δθ/2))``, so ``chord_tol`` allows ``Δθ = 2 acos(1 - tol/r)`` per tick:
-``v ≤ r Δθ · tick_hz``.
+Chord error. Drives interpolate linearly between ticks; a chord subtending ``Δθ`` on radius
+``1/κ`` has sagitta ``(1 - cos(Δθ/2)) / κ``, so ``chord_tol`` allows ``Δθ = 2 acos(1 - tol κ)`` per
+tick: ``v ≤ Δθ / κ · tick_hz``.
 
 Junctions. A velocity step ``v |ΔT_i|`` within one tick must stay within
 ``JUNCTION_SHARE · a_max_i · dt``, which gives ``v ≤ JUNCTION_SHARE · a_max_i · dt / |ΔT_i|``.
@@ -41,13 +42,16 @@ JUNCTION_SHARE = 0.05
 NUMERIC_MARGIN = 1e-5
 ARC_NORMAL_SHARE = 2**-0.5
 CORNER_ANGLE_RAD = 0.0175  # 1°
+#: Tangent differences below this are rounding (e.g. between the C2 pieces of one spline): no kink.
+KINK_TOL = 1e-10
 
 
 def span_caps(
     kind: jnp.ndarray,
     length: jnp.ndarray,
-    radius: jnp.ndarray,
+    kappa: jnp.ndarray,
     tangent: jnp.ndarray,
+    moving: jnp.ndarray,
     feed_mm_s: jnp.ndarray,
     v_max: jnp.ndarray,
     a_max: jnp.ndarray,
@@ -58,8 +62,9 @@ def span_caps(
     """Speed cap (as v², mm²/s²) and tangential acceleration cap (mm/s²) of each span.
 
     Args:
-        kind, length, radius: ``(n,)`` span arrays.
-        tangent: ``(n, 3)`` unit tangent of lines (any unit vector for arcs).
+        kind, length: ``(n,)`` span arrays; kappa: ``(n,)`` maximum curvature (1/mm).
+        tangent: ``(n, 3)`` unit tangent of lines (any unit vector for curved spans).
+        moving: ``(n, 3)`` bool, the axis moves within the span.
         feed_mm_s: ``(n,)`` programmed speed (feed or rapid cap) of each span.
         v_max, a_max: ``(3,)`` axis limits for x, y, z (``inf`` where the machine lacks the axis).
         at_kink: ``(n,)`` bool, the span starts or ends at a junction passed with a velocity step.
@@ -72,20 +77,21 @@ def span_caps(
     v_line = jnp.min(v_max[None, :] * inv, axis=1)
     a_line = jnp.min(a_smooth * inv, axis=1)
 
-    is_arc = kind == SpanKind.ARC
-    r = jnp.where(is_arc, radius, 1.0)
-    a_plane = jnp.minimum(a_smooth[:, 0], a_smooth[:, 1])
-    v_arc = jnp.minimum(v_max[0], v_max[1])
-    x_centripetal = ARC_NORMAL_SHARE * a_plane * r
-    cos_half = jnp.clip(1.0 - chord_tol_mm / r, -1.0, 1.0)
-    v_chord = r * 2.0 * jnp.arccos(cos_half) * tick_hz
-    x_arc = jnp.minimum(jnp.minimum(v_arc, v_chord) ** 2, x_centripetal)
+    # Curved spans (arcs, B-spline pieces): |a_i| <= sqrt(a_t² + (v² κ)²) on every axis, |v_i| <= v.
+    curved = (kind == SpanKind.ARC) | (kind == SpanKind.CURVE)
+    a_curve = jnp.min(jnp.where(moving, a_smooth, jnp.inf), axis=1)
+    v_curve = jnp.min(jnp.where(moving, v_max[None, :], jnp.inf), axis=1)
+    bent = kappa > 0
+    k_safe = jnp.where(bent, kappa, 1.0)
+    x_centripetal = jnp.where(bent, ARC_NORMAL_SHARE * a_curve / k_safe, jnp.inf)
+    cos_half = jnp.clip(1.0 - chord_tol_mm * k_safe, -1.0, 1.0)
+    v_chord = jnp.where(bent, 2.0 * jnp.arccos(cos_half) / k_safe * tick_hz, jnp.inf)
+    x_curve = jnp.minimum(jnp.minimum(v_curve, v_chord) ** 2, x_centripetal)
 
-    x_axis = jnp.where(is_arc, x_arc, v_line**2)
+    x_axis = jnp.where(curved, x_curve, v_line**2)
     x_cap = jnp.minimum(x_axis, feed_mm_s**2)
-    a_n = x_cap / r
-    a_arc = jnp.sqrt(jnp.maximum(a_plane**2 - a_n**2, 0.0))
-    a_t = jnp.where(is_arc, a_arc, a_line)
+    a_n = x_cap * jnp.where(bent, kappa, 0.0)
+    a_t = jnp.where(curved, jnp.sqrt(jnp.maximum(a_curve**2 - a_n**2, 0.0)), a_line)
     is_point = kind == SpanKind.POINT
     return jnp.where(is_point, 0.0, x_cap), jnp.where(is_point, jnp.inf, a_t)
 

@@ -14,12 +14,14 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.spans import SpanKind
-from jaxcnc.planners.limits import NUMERIC_MARGIN, is_corner, junction_caps, span_caps
+from jaxcnc.planners.limits import KINK_TOL, NUMERIC_MARGIN, is_corner, junction_caps, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
 
 MIN_BUCKET = 256
+#: An axis whose extent within a span is below this (mm) does not move there.
+MOVING_MM = 1e-12
 
 
 def bucket_size(n: int) -> int:
@@ -29,7 +31,7 @@ def bucket_size(n: int) -> int:
 
 @jax.jit
 def plan_arrays(
-    kind, length, radius, tangent_in, tangent_out, feed, dwell, stop_before, v_max, a_max, chord_tol, tick_hz
+    kind, length, kappa, moving, tangent_in, tangent_out, feed, dwell, stop_before, v_max, a_max, chord_tol, tick_hz
 ):
     """The planner as one array program; all span arrays ``(n,)`` or ``(n, 3)``.
 
@@ -38,10 +40,10 @@ def plan_arrays(
     """
     t_prev, t_next = tangent_out[:-1], tangent_in[1:]
     stop = stop_before[1:] | is_corner(t_prev, t_next) | (kind[:-1] == SpanKind.POINT) | (kind[1:] == SpanKind.POINT)
-    kink = ~stop & jnp.any(t_prev != t_next, axis=1)  # passed moving, with a velocity step
+    kink = ~stop & (jnp.max(jnp.abs(t_prev - t_next), axis=1) > KINK_TOL)  # passed moving, with a velocity step
     no = jnp.zeros((1,), bool)
     at_kink = jnp.concatenate([no, kink]) | jnp.concatenate([kink, no])
-    x_cap, a_t = span_caps(kind, length, radius, tangent_in, feed, v_max, a_max, chord_tol, tick_hz, at_kink)
+    x_cap, a_t = span_caps(kind, length, kappa, tangent_in, moving, feed, v_max, a_max, chord_tol, tick_hz, at_kink)
     j_cap = junction_caps(t_prev, t_next, a_max, tick_hz)
     j_cap = jnp.where(stop, 0.0, j_cap)
     j_cap = jnp.minimum(j_cap, jnp.minimum(x_cap[:-1], x_cap[1:]))
@@ -69,7 +71,8 @@ def plan_lookahead(req: PlanRequest) -> Plan:
     args = (
         _pad(spans.kind, m, SpanKind.POINT),
         _pad(spans.length, m, 0.0),
-        _pad(spans.radius, m, np.inf),
+        _pad(spans.kappa_max, m, 0.0),
+        _pad(spans.hi - spans.lo > MOVING_MM, m, False),
         _pad(spans.tangent_in, m, 0.0),
         _pad(spans.tangent_out, m, 0.0),
         _pad(req.feed_mm_s, m, 0.0),

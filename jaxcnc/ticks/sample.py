@@ -25,7 +25,7 @@ from jaxcnc.planners.trapezoid import bucket_size
 
 CHUNK_TICKS = 1 << 16
 _PLAN_KEYS = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-_SPAN_KEYS = ("coeffs", "kind", "length", "radius", "half_angle")
+_SPAN_KEYS = ("coeffs", "origin", "kind", "length", "radius", "half_angle", "cheb_s", "cheb_u")
 
 
 @partial(jax.jit, static_argnames=("chunk",))
@@ -36,8 +36,8 @@ def _positions_chunk(
     tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
     seg = segment_of_tick(plan["first_tick"], tick)
     s = s_at(plan, spans["length"], seg, tick, tick_hz)
-    u = u_of_s(spans["kind"][seg], spans["length"][seg], spans["radius"][seg], spans["half_angle"][seg], s)
-    (p,) = evaluate(spans["coeffs"][seg], u)
+    u = u_of_s(spans, seg, s)
+    (p,) = evaluate(spans["coeffs"][seg], spans["origin"][seg], u)
     return p, seg
 
 
