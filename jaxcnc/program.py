@@ -92,7 +92,9 @@ def make_curve_table(curves: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]
         if weights.shape != (m,) or not np.all(weights > 0) or not np.all(np.isfinite(weights)):
             raise ValueError(f"curve {i}: needs {m} positive finite weights")
         if knots.shape != (m + p + 1,):
-            raise ValueError(f"curve {i}: needs {m + p + 1} knots for {m} control points of degree {p}, got {knots.size}")
+            raise ValueError(
+                f"curve {i}: needs {m + p + 1} knots for {m} control points of degree {p}, got {knots.size}"
+            )
         if not np.all(np.isfinite(points)) or not np.all(np.isfinite(knots)):
             raise ValueError(f"curve {i}: control points and knots must be finite")
         if np.any(np.diff(knots) < 0):

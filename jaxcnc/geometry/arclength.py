@@ -153,8 +153,18 @@ def refine_curved(
         length, err = gl_length(coeffs)
         s_series, u_series, ok = _fits(coeffs, length)
         ok = ok | (rnd == max_rounds - 1)
-        done.append(dict(coeffs=coeffs[ok], origin=origin[ok], owner=owner[ok], length=length[ok],
-                         length_err=err[ok], cheb_s=s_series[ok], cheb_u=u_series[ok], key=order[ok]))
+        done.append(
+            dict(
+                coeffs=coeffs[ok],
+                origin=origin[ok],
+                owner=owner[ok],
+                length=length[ok],
+                length_err=err[ok],
+                cheb_s=s_series[ok],
+                cheb_u=u_series[ok],
+                key=order[ok],
+            )
+        )
         bad = ~ok
         if not bad.any():
             break

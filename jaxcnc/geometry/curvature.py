@@ -62,6 +62,7 @@ def extents(coeffs: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, np.ndar
     lo = np.empty((coeffs.shape[0], 3))
     hi = np.empty_like(lo)
     for axis in range(3):
+
         def coord(u: np.ndarray, axis: int = axis) -> np.ndarray:
             return derivatives(coeffs, u, 0)[0][..., axis]
 

@@ -113,9 +113,20 @@ def _line_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     length = np.linalg.norm(d, axis=1)
     t = d / length[:, None]
     coeffs, origin = _quadratic(a, (a + b) / 2, b, np.ones(len(rows)))
-    return dict(coeffs=coeffs, origin=origin, kind=SpanKind.LINE, length=length, radius=np.inf,
-                half_angle=0.0, kappa_max=0.0, tangent_in=t, tangent_out=t, lo=np.minimum(a, b),
-                hi=np.maximum(a, b), block=rows)
+    return dict(
+        coeffs=coeffs,
+        origin=origin,
+        kind=SpanKind.LINE,
+        length=length,
+        radius=np.inf,
+        half_angle=0.0,
+        kappa_max=0.0,
+        tangent_in=t,
+        tangent_out=t,
+        lo=np.minimum(a, b),
+        hi=np.maximum(a, b),
+        block=rows,
+    )
 
 
 def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -165,8 +176,20 @@ def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
         lo = np.where(inside[:, None], np.minimum(lo, ext), lo)
         hi = np.where(inside[:, None], np.maximum(hi, ext), hi)
     coeffs, origin = _quadratic(p0, p1, p2, w1)
-    return dict(coeffs=coeffs, origin=origin, kind=SpanKind.ARC, length=rr * phi, radius=rr, half_angle=phi / 2,
-                kappa_max=1.0 / rr, tangent_in=tangent(a0), tangent_out=tangent(a1), lo=lo, hi=hi, block=rows[idx])
+    return dict(
+        coeffs=coeffs,
+        origin=origin,
+        kind=SpanKind.ARC,
+        length=rr * phi,
+        radius=rr,
+        half_angle=phi / 2,
+        kappa_max=1.0 / rr,
+        tangent_in=tangent(a0),
+        tangent_out=tangent(a1),
+        lo=lo,
+        hi=hi,
+        block=rows[idx],
+    )
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -192,18 +215,43 @@ def _curve_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndar
     _, d1_0, d2_0 = (x[:, 0] for x in derivatives(c, np.zeros((c.shape[0], 1)), 2))
     _, d1_1, d2_1 = (x[:, 0] for x in derivatives(c, np.ones((c.shape[0], 1)), 2))
     lo, hi = extents(c, fit["origin"])
-    return dict(coeffs=c, origin=fit["origin"], kind=SpanKind.CURVE, length=fit["length"],
-                length_err=fit["length_err"], radius=np.inf, half_angle=0.0, kappa_max=curvature_max(c),
-                tangent_in=_unit(d1_0, d2_0), tangent_out=_unit(d1_1, -d2_1), lo=lo, hi=hi, block=fit["owner"],
-                cheb_s=fit["cheb_s"], cheb_u=fit["cheb_u"])
+    return dict(
+        coeffs=c,
+        origin=fit["origin"],
+        kind=SpanKind.CURVE,
+        length=fit["length"],
+        length_err=fit["length_err"],
+        radius=np.inf,
+        half_angle=0.0,
+        kappa_max=curvature_max(c),
+        tangent_in=_unit(d1_0, d2_0),
+        tangent_out=_unit(d1_1, -d2_1),
+        lo=lo,
+        hi=hi,
+        block=fit["owner"],
+        cheb_s=fit["cheb_s"],
+        cheb_u=fit["cheb_u"],
+    )
 
 
 def _point_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     a = p.end[rows]
     z = np.zeros_like(a)
     coeffs, origin = _quadratic(a, a, a, np.ones(len(rows)))
-    return dict(coeffs=coeffs, origin=origin, kind=SpanKind.POINT, length=0.0, radius=np.inf, half_angle=0.0,
-                kappa_max=0.0, tangent_in=z, tangent_out=z, lo=a, hi=a, block=rows)
+    return dict(
+        coeffs=coeffs,
+        origin=origin,
+        kind=SpanKind.POINT,
+        length=0.0,
+        radius=np.inf,
+        half_angle=0.0,
+        kappa_max=0.0,
+        tangent_in=z,
+        tangent_out=z,
+        lo=a,
+        hi=a,
+        block=rows,
+    )
 
 
 def span_degree(program: Program) -> int:
@@ -215,8 +263,23 @@ def span_degree(program: Program) -> int:
     return next(d for d in DEGREE_BUCKETS if d >= need)
 
 
-_KEYS = ("coeffs", "origin", "kind", "length", "length_err", "radius", "half_angle", "kappa_max", "tangent_in",
-         "tangent_out", "lo", "hi", "block", "cheb_s", "cheb_u")
+_KEYS = (
+    "coeffs",
+    "origin",
+    "kind",
+    "length",
+    "length_err",
+    "radius",
+    "half_angle",
+    "kappa_max",
+    "tangent_in",
+    "tangent_out",
+    "lo",
+    "hi",
+    "block",
+    "cheb_s",
+    "cheb_u",
+)
 
 
 def build_spans(program: Program) -> Spans:
@@ -231,8 +294,11 @@ def build_spans(program: Program) -> Spans:
     move_len = np.linalg.norm(program.end - program.start, axis=1)
     is_line = (kind == Kind.LINE) & (move_len > MIN_LENGTH_MM)
     parts = []
-    for build, mask in ((_line_spans, is_line), (_arc_spans, kind == Kind.ARC), (_point_spans,
-                        (kind == Kind.DWELL) | (kind == Kind.EVENT))):
+    for build, mask in (
+        (_line_spans, is_line),
+        (_arc_spans, kind == Kind.ARC),
+        (_point_spans, (kind == Kind.DWELL) | (kind == Kind.EVENT)),
+    ):
         if mask.any():
             parts.append(build(program, np.flatnonzero(mask)))
     if has_curves:

@@ -1,0 +1,1 @@
+"""Front ends other than G-code: B-spline/NURBS curve data (DXF, STL and point files come later)."""

@@ -1,0 +1,303 @@
+"""B-spline / NURBS geometry: exact decomposition, certified length, u(s), curvature, constant feed."""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import quad
+from scipy.interpolate import BSpline
+
+from jaxcnc.geometry import SpanKind, build_spans
+from jaxcnc.geometry.bezier import homogeneous_power, nurbs_to_bezier
+from jaxcnc.geometry.evaluate import evaluate
+from jaxcnc.io.curves import curves_program, read_curves_json
+from jaxcnc.program import make_curve_table
+from tests.conftest import CORPUS, make_machine
+
+BUTTERFLY = CORPUS / "nurbs" / "butterfly_deg3_iges.json"
+BUTTERFLY_LENGTH = 382.8603111  # mm, the documented length of the butterfly
+
+
+def butterfly():
+    if not BUTTERFLY.is_file():
+        pytest.skip("corpus butterfly not available (../shared/corpus is absent)")
+    return read_curves_json(BUTTERFLY)[0]
+
+
+def random_nurbs(degree: int, n: int, seed: int, closed_knots: bool = False):
+    rng = np.random.default_rng(seed)
+    pts = np.cumsum(rng.normal(0, 10, (n, 3)), axis=0) + 100
+    w = rng.uniform(0.3, 3.0, n)
+    inner = np.sort(rng.uniform(0, 1, n - degree - 1))
+    knots = np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)])
+    return degree, pts, w, knots
+
+
+def scipy_eval(curve, t):
+    p, pts, w, knots = curve
+    pts3 = np.c_[pts, np.zeros(len(pts))] if pts.shape[1] == 2 else pts
+    h = BSpline(knots, np.c_[pts3 * w[:, None], w], p)(t)
+    return h[:, :3] / h[:, 3:]
+
+
+def scipy_length(curve):
+    p, pts, w, knots = curve
+    pts3 = np.c_[pts, np.zeros(len(pts))] if pts.shape[1] == 2 else pts
+    spl = BSpline(knots, np.c_[pts3 * w[:, None], w], p)
+    d = spl.derivative()
+
+    def speed(t):
+        h, h1 = spl(t), d(t)
+        x = h[:3] / h[3]
+        return np.linalg.norm((h1[:3] - x * h1[3]) / h[3])
+
+    brk = np.unique(knots)
+    return sum(
+        quad(speed, a, b, epsabs=1e-14, epsrel=1e-14, limit=200)[0] for a, b in zip(brk[:-1], brk[1:], strict=False)
+    )
+
+
+def bezier_eval_vs_scipy(curve, n=4000, seed=0):
+    p, pts, w, knots = curve
+    pts3 = np.c_[pts, np.zeros(len(pts))] if pts.shape[1] == 2 else pts
+    bp, bw, iv = nurbs_to_bezier(p, pts3, w, knots)
+    coeffs = homogeneous_power(bp, bw, bp[:, 0])
+    rng = np.random.default_rng(seed)
+    k = rng.integers(0, len(iv), n)
+    u = rng.random(n)
+    (mine,) = evaluate(jnp.asarray(coeffs[k]), jnp.asarray(bp[k, 0]), jnp.asarray(u))
+    ref = scipy_eval(curve, iv[k, 0] + (iv[k, 1] - iv[k, 0]) * u)
+    return float(np.max(np.abs(np.asarray(mine) - ref)))
+
+
+def test_butterfly_evaluation_equals_scipy():
+    assert bezier_eval_vs_scipy(butterfly()) <= 1e-12
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 4, 5, 7])
+def test_random_nurbs_evaluation_equals_scipy(degree):
+    curve = random_nurbs(degree, 12 + degree, seed=degree)
+    assert bezier_eval_vs_scipy(curve) <= 1e-11  # coordinates up to ~200 mm
+
+
+def test_butterfly_length_is_certified():
+    curve = butterfly()
+    sp = build_spans(curves_program([curve], 10.0, start=(*curve[1][0], 0.0)))
+    curve_spans = sp.kind == SpanKind.CURVE
+    length = sp.length[curve_spans].sum()
+    assert abs(length - BUTTERFLY_LENGTH) <= 1e-6
+    assert abs(length - scipy_length(curve)) <= 1e-8
+    assert np.all(sp.length_err[curve_spans] <= 1e-9)
+
+
+def test_random_nurbs_length_matches_quad():
+    curve = random_nurbs(5, 20, seed=3)
+    sp = build_spans(curves_program([curve], 10.0, start=curve[1][0]))
+    assert sp.length[sp.kind == SpanKind.CURVE].sum() == pytest.approx(scipy_length(curve), abs=1e-8)
+
+
+SQUARE = np.array([[30, 0], [30, 30], [0, 30], [-30, 30], [-30, 0], [-30, -30], [0, -30], [30, -30], [30, 0]], float)
+CIRCLE_KNOTS = np.array([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1])
+
+
+@pytest.mark.parametrize(
+    ("corner_w", "radius_tol", "length_tol"),
+    [
+        (0.70710678118654757, 1e-9, 1e-9),  # exact weights: the circle itself
+        (0.707, 1e-3, 1e-2),  # rounded weights as the documents write them: within 1 µm of the circle
+    ],
+)
+def test_nurbs_circle_of_the_documents(corner_w, radius_tol, length_tol):
+    w = np.where(np.arange(9) % 2 == 1, corner_w, 1.0)
+    curve = (2, SQUARE, w, CIRCLE_KNOTS)
+    sp = build_spans(curves_program([curve], 10.0, start=(30.0, 0.0, 0.0)))
+    c = sp.kind == SpanKind.CURVE
+    assert sp.length[c].sum() == pytest.approx(2 * np.pi * 30, abs=length_tol)
+    idx = np.repeat(np.flatnonzero(c), 200)
+    u = np.tile(np.linspace(0, 1, 200), int(c.sum()))
+    (p,) = evaluate(jnp.asarray(sp.coeffs[idx]), jnp.asarray(sp.origin[idx]), jnp.asarray(u))
+    r = np.hypot(*np.asarray(p)[:, :2].T)
+    assert np.max(np.abs(r - 30)) <= radius_tol
+    if corner_w > 0.7071:
+        np.testing.assert_allclose(sp.kappa_max[c], 1 / 30, rtol=1e-9)
+
+
+def test_inverse_arc_length_to_a_thousandth_of_a_discrete():
+    """u(s) on certified spans: the point at arc length s is within 1e-6 mm of the true one."""
+    from jaxcnc.geometry.inverse import u_of_s
+
+    curve = random_nurbs(3, 15, seed=7)
+    sp = build_spans(curves_program([curve], 10.0, start=curve[1][0]))
+    spans = {
+        k: jnp.asarray(getattr(sp, k))
+        for k in ("kind", "length", "radius", "half_angle", "cheb_s", "cheb_u", "coeffs", "origin")
+    }
+    rng = np.random.default_rng(0)
+    curve_idx = np.flatnonzero(sp.kind == SpanKind.CURVE)
+    k = rng.choice(curve_idx, 150)
+    u_ref = rng.random(150)
+    # reference arc lengths by adaptive quadrature of the exact speed
+    from jaxcnc.geometry.arclength import speed
+
+    s_ref = np.array(
+        [
+            quad(
+                lambda x, kk=kk: speed(sp.coeffs[kk : kk + 1], np.array([[x]]))[0, 0], 0, uu, epsabs=1e-14, epsrel=1e-14
+            )[0]
+            for kk, uu in zip(k, u_ref, strict=False)
+        ]
+    )
+    u = u_of_s(spans, jnp.asarray(k), jnp.asarray(s_ref))
+    (p,) = evaluate(spans["coeffs"][k], spans["origin"][k], u)
+    (p_ref,) = evaluate(spans["coeffs"][k], spans["origin"][k], jnp.asarray(u_ref))
+    assert np.max(np.linalg.norm(np.asarray(p) - np.asarray(p_ref), axis=1)) <= 1e-6
+
+
+def test_third_derivative_and_curvature():
+    curve = random_nurbs(4, 10, seed=11)
+    sp = build_spans(curves_program([curve], 10.0, start=curve[1][0]))
+    c = np.flatnonzero(sp.kind == SpanKind.CURVE)[:5]
+    u = np.full(c.size, 0.37)
+    h = 1e-4
+    c_j, o_j = jnp.asarray(sp.coeffs[c]), jnp.asarray(sp.origin[c])
+    d = [np.asarray(x) for x in evaluate(c_j, o_j, jnp.asarray(u), 3)]
+    d2p = np.asarray(evaluate(c_j, o_j, jnp.asarray(u + h), 2)[2])
+    d2m = np.asarray(evaluate(c_j, o_j, jnp.asarray(u - h), 2)[2])
+    np.testing.assert_allclose(d[3], (d2p - d2m) / (2 * h), rtol=1e-5, atol=1e-6 * np.abs(d[3]).max())
+    # the span maximum of curvature is not below any sampled curvature
+    from jaxcnc.geometry.curvature import curvature
+
+    uu = np.broadcast_to(np.linspace(0, 1, 2001), (c.size, 2001))
+    dense = curvature(sp.coeffs[c], uu).max(axis=1)
+    assert np.all(sp.kappa_max[c] >= dense * (1 - 1e-12))
+    assert np.all(sp.kappa_max[c] <= dense * (1 + 1e-4))
+
+
+def _arc_per_tick(p: np.ndarray) -> np.ndarray:
+    """Path length between consecutive ticks, on the circle through each three consecutive ticks."""
+    a, b, c = p[:-2], p[1:-1], p[2:]
+    ab = np.linalg.norm(b - a, axis=1)
+    kappa = (
+        2
+        * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        / np.maximum(ab * np.linalg.norm(c - b, axis=1) * np.linalg.norm(c - a, axis=1), 1e-300)
+    )
+    x = kappa * ab / 2
+    return np.where(x > 1e-9, ab * np.arcsin(np.clip(x, 0, 1)) / np.maximum(x, 1e-300), ab)
+
+
+def test_butterfly_ticks_at_constant_feed(tmp_path):
+    curve = butterfly()
+    feed = 2.0  # on the issue's machine (v 100 mm/s, a 1000 mm/s²) no limit binds at this feed
+    m = make_machine(v=100, a=1000)
+    prog = curves_program([curve], feed, start=(*curve[1][0], 0.0))
+    job, table, meas = table_of_program(prog, m, tmp_path)
+    assert meas.ok, meas.violations
+    assert np.all(job.plan.vp[job.spans.kind == SpanKind.CURVE] == pytest.approx(feed, rel=1e-12))
+    ramp = int(2 * feed / 1000 * m.tick_hz) + 5
+    per_tick = _arc_per_tick(table.exact_mm())[ramp:-ramp]
+    assert per_tick.size > 0.99 * job.plan.n_ticks
+    assert np.max(np.abs(per_tick / (feed / m.tick_hz) - 1)) <= 1e-6
+
+
+def table_of_program(prog, machine, folder):
+    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.planners import plan_job
+    from jaxcnc.ticks.table import write_table
+    from jaxcnc.ticks.verify import measure_table
+
+    job = plan_job(prog, machine)
+    t = TableFile(write_table(job, folder / "c.ticks", progress=False))
+    return job, t, measure_table(t, machine)
+
+
+def test_chain_of_line_arc_cubic_nurbs_at_constant_speed(tmp_path):
+    """The documents' validation: a smooth chain of line, arc, cubic and NURBS at constant speed."""
+    feed = 20.0
+    # line along +x to (10, 0); quarter arc to (20, 10) (tangent +y); cubic continuing +y; NURBS onward
+    cubic = (
+        3,
+        np.array([[20, 10], [20, 15], [25, 20], [30, 20]], float),
+        np.ones(4),
+        np.array([0, 0, 0, 0, 1, 1, 1, 1], float),
+    )
+    nurbs = (
+        2,
+        np.array([[30, 20], [35, 20], [40, 25], [40, 30]], float),
+        np.array([1, 0.9, 1.3, 1]),
+        np.array([0, 0, 0, 0.5, 1, 1, 1], float),
+    )
+    m = make_machine(v=100, a=50000)
+    base = curves_program([cubic, nurbs], feed, start=(20.0, 10.0, 0.0))
+    # prepend a line and an arc by G-code semantics: build the rows by hand
+    from jaxcnc.program import Kind, program_from_columns
+
+    n0 = len(base)
+    cols = {
+        k: np.concatenate([v_head, getattr(base, k)])
+        for k, v_head in {
+            "kind": np.array([Kind.LINE, Kind.ARC]),
+            "start": np.array([[0, 0, 0], [10, 0, 0]], float),
+            "end": np.array([[10, 0, 0], [20, 10, 0]], float),
+            "center": np.array([[np.nan] * 3, [10, 10, 0]]),
+            "turn": np.array([0, 1]),
+            "feed": np.array([feed, feed]),
+            "curve": np.array([-1, -1]),
+            "line": np.array([1, 2]),
+            "rapid": np.array([False, False]),
+            "stop_before": np.array([True, False]),
+        }.items()
+    }
+    cols["line"][2:] += 2
+    cols["stop_before"][2] = False
+    prog = program_from_columns(file="chain", curves=base.curves, **cols)
+    assert len(prog) == n0 + 2
+    job, table, meas = table_of_program(prog, m, tmp_path)
+    assert meas.ok, meas.violations
+    rest = np.flatnonzero(job.plan.v0 == 0)
+    assert list(rest) == [0]  # stopped only at the start: every junction is passed at speed
+    per_tick = _arc_per_tick(table.exact_mm())
+    ramp = int(2 * feed / 50000 * m.tick_hz) + 5
+    assert np.max(np.abs(per_tick[ramp:-ramp] / (feed / m.tick_hz) - 1)) <= 1e-6
+
+
+@pytest.mark.parametrize(
+    ("curve", "needle"),
+    [
+        ((3, np.zeros((3, 2)), np.ones(3), np.zeros(7)), "at least 4 control points"),
+        ((2, np.zeros((4, 2)), np.ones(4), np.zeros(6)), "needs 7 knots"),
+        ((2, np.zeros((4, 2)), -np.ones(4), np.zeros(7)), "positive finite weights"),
+        ((2, np.zeros((4, 2)), np.ones(4), np.array([0, 0, 0, 2, 1, 1, 1.0])), "must not decrease"),
+        ((2, np.zeros((4, 2)), np.ones(4), np.array([0, 0, 0.5, 0.5, 1, 1, 1.0])), "clamped"),
+        ((9, np.zeros((12, 2)), np.ones(12), np.zeros(22)), "outside 1..7"),
+    ],
+)
+def test_bad_curve_data(curve, needle):
+    with pytest.raises(ValueError, match=needle):
+        make_curve_table([curve])
+
+
+def test_curve_file_errors(tmp_path):
+    from jaxcnc.errors import SourceError
+
+    f = tmp_path / "c.json"
+    f.write_text('{"degree": 2, "control_points": [[0, 0], [1, 1]], "knots": [0, 0, 0, 1, 1]}')
+    with pytest.raises(SourceError, match="at least 3 control points"):
+        read_curves_json(f)
+    f.write_text("{not json")
+    with pytest.raises(SourceError, match="cannot read curve file"):
+        read_curves_json(f)
+
+
+def test_length_error_bound_reported():
+    # a near-cusp (a loop that almost stops): subdivision keeps the bound and the fits
+    pts = np.array([[0, 0], [10, 10], [0, 10], [10, 0]], float)
+    curve = (3, pts, np.ones(4), np.array([0, 0, 0, 0, 1, 1, 1, 1], float))
+    sp = build_spans(curves_program([curve], 10.0))
+    c = sp.kind == SpanKind.CURVE
+    assert sp.length[c].sum() == pytest.approx(scipy_length(curve), abs=1e-8)
+    assert np.all(sp.length_err[c] <= 1e-9)
+    assert math.isfinite(sp.kappa_max[c].max())
