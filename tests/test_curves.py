@@ -127,14 +127,11 @@ def test_nurbs_circle_of_the_documents(corner_w, radius_tol, length_tol):
 
 def test_inverse_arc_length_to_a_thousandth_of_a_discrete():
     """u(s) on certified spans: the point at arc length s is within 1e-6 mm of the true one."""
-    from jaxcnc.geometry.inverse import u_of_s
+    from jaxcnc.geometry.inverse import span_arrays, u_of_s
 
     curve = random_nurbs(3, 15, seed=7)
     sp = build_spans(curves_program([curve], 10.0, start=curve[1][0]))
-    spans = {
-        k: jnp.asarray(getattr(sp, k))
-        for k in ("kind", "length", "radius", "half_angle", "cheb_s", "cheb_u", "coeffs", "origin")
-    }
+    spans = span_arrays(sp)
     rng = np.random.default_rng(0)
     curve_idx = np.flatnonzero(sp.kind == SpanKind.CURVE)
     k = rng.choice(curve_idx, 150)
@@ -150,10 +147,12 @@ def test_inverse_arc_length_to_a_thousandth_of_a_discrete():
             for kk, uu in zip(k, u_ref, strict=False)
         ]
     )
-    u = u_of_s(spans, jnp.asarray(k), jnp.asarray(s_ref))
-    (p,) = evaluate(spans["coeffs"][k], spans["origin"][k], u)
-    (p_ref,) = evaluate(spans["coeffs"][k], spans["origin"][k], jnp.asarray(u_ref))
-    assert np.max(np.linalg.norm(np.asarray(p) - np.asarray(p_ref), axis=1)) <= 1e-6
+    coeffs, origin = jnp.asarray(sp.coeffs[k]), jnp.asarray(sp.origin[k])
+    (p_ref,) = evaluate(coeffs, origin, jnp.asarray(u_ref))
+    for steps in (0, 1):  # the certified fit alone, and with a Newton correction
+        u = u_of_s(spans, jnp.asarray(k), jnp.asarray(s_ref), newton_steps=steps)
+        (p,) = evaluate(coeffs, origin, u)
+        assert np.max(np.linalg.norm(np.asarray(p) - np.asarray(p_ref), axis=1)) <= 1e-9
 
 
 def test_third_derivative_and_curvature():

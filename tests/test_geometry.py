@@ -19,8 +19,9 @@ def spans_of(text: str):
 
 
 def span_dict(spans):
-    keys = ("kind", "length", "radius", "half_angle", "cheb_s", "cheb_u", "coeffs", "origin")
-    return {k: jnp.asarray(getattr(spans, k)) for k in keys}
+    from jaxcnc.geometry.inverse import span_arrays
+
+    return span_arrays(spans)
 
 
 def at_s(spans, idx: np.ndarray, s: np.ndarray, order: int = 0):
@@ -143,3 +144,19 @@ def test_evaluate_is_batched_and_jittable(order):
     out = f(jnp.asarray(sp.coeffs[[0, 1, 1]]), jnp.asarray(sp.origin[[0, 1, 1]]), jnp.array([0.5, 0.0, 1.0]))
     assert len(out) == order + 1 and out[0].shape == (3, 3)
     np.testing.assert_allclose(np.asarray(out[0][2]), [0, 1, 0], atol=1e-15)
+
+
+@pytest.mark.parametrize("order", [0, 1, 2, 3])
+def test_column_evaluation_equals_row_evaluation(order):
+    from jaxcnc.geometry.evaluate import evaluate_spans
+    from jaxcnc.geometry.inverse import span_arrays
+
+    sp = spans_of("G1 X1 Y2 F60\nG3 X0 Y1 I-1 J0\nG2 X5 Y1 R3\n")
+    arrays = span_arrays(sp)
+    rng = np.random.default_rng(order)
+    idx = rng.integers(0, len(sp), 500)
+    u = rng.random(500)
+    rows = ev(sp, idx, u, order)
+    cols = evaluate_spans(arrays["coeffs_t"], arrays["origin_t"], jnp.asarray(idx), jnp.asarray(u), order)
+    for a, b in zip(rows, cols, strict=True):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=1e-12)

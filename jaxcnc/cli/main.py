@@ -217,9 +217,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from jaxcnc.bench import run_benchmarks
+    from jaxcnc.bench import run_benchmarks, run_geometry_benchmarks
 
-    run_benchmarks(n_blocks=args.blocks, repeats=args.repeats)
+    if args.suite in ("all", "plan"):
+        run_benchmarks(n_blocks=args.blocks, repeats=args.repeats)
+    if args.suite in ("all", "geometry"):
+        run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
     return 0
 
 
@@ -294,12 +297,20 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser(
         "bench",
         help="benchmarks: planning and tick throughput against baselines",
-        description="Plan a synthetic program of short line blocks and print blocks/s, ticks/s "
-        "and ratios against a sequential baseline measured in the same run; JIT compile time "
-        "is reported apart.",
+        description="plan: a synthetic program of 50-150 um line blocks; blocks/s and ticks/s, the look-ahead "
+        "against sequential Python and NumPy. geometry: NURBS evaluation against scipy and geomdl, tick "
+        "generation on curves. Peers run in the same process; JIT compile time is reported apart.",
     )
     sp.add_argument("--blocks", type=int, default=100_000, help="synthetic program size (default: %(default)s)")
     sp.add_argument("--repeats", type=int, default=5, help="steady-state repetitions (default: %(default)s)")
+    sp.add_argument("--points", type=int, default=1_000_000, help="NURBS evaluation points (default: %(default)s)")
+    sp.add_argument(
+        "suite",
+        nargs="?",
+        default="all",
+        choices=("all", "plan", "geometry"),
+        help="which benchmarks (default: %(default)s)",
+    )
     sp.set_defaults(func=cmd_bench)
     return p
 

@@ -7,9 +7,10 @@ at most ``tol`` per span.
 
 Fits. On each curved span the speed ``|P'(u)|`` is interpolated at 32 Chebyshev points; the
 integral of that series is ``s(u)`` (Clenshaw–Curtis), and a second Chebyshev series fits the
-inverse ``u(s)``. A span is subdivided (exactly, by reparametrisation) until the speed series
-has converged to rounding level, ``s(1)`` agrees with the quadrature length and the inverse fit
-is accurate; the tick stage then polishes ``u(s)`` with Newton steps on the exact speed.
+inverse ``u(s)``, whose nodes are solved by Newton's method on ``s(u)``. A span is subdivided
+(exactly, by reparametrisation) until the speed series has converged to rounding level, ``s(1)``
+agrees with the quadrature length and the inverse fit is within ``INVERSE_TOL_MM`` of arc length
+between its nodes — so the tick stage needs one series evaluation per tick.
 
 Everything is vectorised NumPy over spans (a few refinement rounds, no loop over spans or points).
 """
@@ -23,6 +24,8 @@ from jaxcnc.geometry.bezier import restrict
 
 GL_ORDER = 16
 LENGTH_TOL_MM = 1e-10
+#: Certified accuracy of the u(s) fit, as arc length between its nodes (mm).
+INVERSE_TOL_MM = 1e-11
 CHEB_N = 32
 _GX, _GW = np.polynomial.legendre.leggauss(GL_ORDER)
 _GX = (_GX + 1) / 2
@@ -121,7 +124,8 @@ def _fits(coeffs: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarra
     u_mid = _chebval_rows(u_series, np.broadcast_to(mid, (u.shape[0], mid.size)))
     s_mid = _chebval_rows(s_series, 2 * np.clip(u_mid, 0, 1) - 1)
     inv_err = np.max(np.abs(s_mid - ((mid + 1) / 2)[None, :] * length[:, None]), axis=1)
-    inv_ok = inv_err <= 1e-6 * np.maximum(length, 1e-3)
+    u_tail = np.max(np.abs(u_series[:, -4:]), axis=1)
+    inv_ok = (inv_err <= INVERSE_TOL_MM) & (u_tail <= 1e-14)
     del sig
     return s_series, u_series, speed_ok & end_ok & inv_ok
 

@@ -328,3 +328,20 @@ def build_spans(program: Program) -> Spans:
     for v in out.values():
         v.setflags(write=False)
     return Spans(**out)
+
+
+def pad_spans(spans: Spans, n: int) -> Spans:
+    """``spans`` followed by point spans up to ``n`` rows (static shapes for compiled kernels)."""
+    extra = n - len(spans)
+    if extra < 0:
+        raise ValueError("cannot pad to fewer spans")
+    fill = {"kind": SpanKind.POINT, "length": 0.0, "radius": np.inf, "block": -1}
+    out = {}
+    for key in _KEYS:
+        a = getattr(spans, key)
+        value = fill.get(key, 0.0)
+        pad = np.full((extra,) + a.shape[1:], value, dtype=a.dtype)
+        if key == "coeffs":
+            pad[:, 0, 3] = 1.0  # w = 1: a point at the origin
+        out[key] = np.concatenate([a, pad])
+    return Spans(**out)

@@ -16,8 +16,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.evaluate import evaluate
-from jaxcnc.geometry.inverse import u_of_s
+from jaxcnc.geometry.evaluate import evaluate_spans
+from jaxcnc.geometry.inverse import span_arrays, u_of_s
+from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.hw.tablefile import FINE_SCALE
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.timelaw import s_at, segment_of_tick
@@ -25,20 +26,35 @@ from jaxcnc.planners.trapezoid import bucket_size
 
 CHUNK_TICKS = 1 << 16
 _PLAN_KEYS = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-_SPAN_KEYS = ("coeffs", "origin", "kind", "length", "radius", "half_angle", "cheb_s", "cheb_u")
 
 
 @partial(jax.jit, static_argnames=("chunk",))
-def _positions_chunk(
+def _params_chunk(
     first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Exact program-axis positions ``(chunk, 3)`` and their segment, for ticks ``first + i``."""
+    """Segment and span parameter ``u`` ``(chunk,)`` of ticks ``first + i``: tick → s → u."""
     tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
     seg = segment_of_tick(plan["first_tick"], tick)
     s = s_at(plan, spans["length"], seg, tick, tick_hz)
-    u = u_of_s(spans, seg, s)
-    (p,) = evaluate(spans["coeffs"][seg], spans["origin"][seg], u)
-    return p, seg
+    return seg, u_of_s(spans, seg, s)
+
+
+@jax.jit
+def _positions(spans: dict, seg: jnp.ndarray, u: jnp.ndarray) -> jnp.ndarray:
+    (p,) = evaluate_spans(spans["coeffs_t"], spans["origin_t"], seg, u)
+    return p
+
+
+def _positions_chunk(
+    first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
+) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Exact program-axis positions ``(chunk, 3)`` and their segment, for ticks ``first + i``.
+
+    Two compiled programs, not one: fused together, XLA's CPU backend recomputes the time law
+    and ``u(s)`` inside every use Horner's scheme makes of ``u`` (measured 4x slower).
+    """
+    seg, u = _params_chunk(first, n_last, plan, spans, tick_hz, chunk)
+    return _positions(spans, seg, u), seg
 
 
 @jax.jit
@@ -64,9 +80,7 @@ class TickSampler:
             return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
 
         self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in _PLAN_KEYS}
-        self._spans = {
-            k: jnp.asarray(pad(getattr(spans, k), 1.0 if k in ("length", "radius") else 0)) for k in _SPAN_KEYS
-        }
+        self._spans = span_arrays(pad_spans(spans, m))
         m_axes = job.machine.axis_names
         self._src = np.asarray(job.axis_source)
         self._home = np.array([job.machine.axis(a).home for a in m_axes])
