@@ -74,6 +74,8 @@ def plot_table(
     h = table.header
     ser = _series(table, MAX_POINTS)
     lit = lit_mask(table)[(ser["t"] * h.tick_hz).round().astype(np.int64)]
+    if not lit.any():  # a job without laser events (a dry run): colour the whole path by speed
+        lit[:] = True
     axes = h.axes
     fig = plt.figure(figsize=(15, 8.5), constrained_layout=True)
     gs = fig.add_gridspec(3, 2, width_ratios=[1.15, 1])
@@ -92,7 +94,7 @@ def plot_table(
     ax_path.set_ylabel("Y [mm]")
     name = title or Path(h.meta.get("source", table.path.name)).name
     ax_path.set_title(name if len(name) <= 60 else "…" + name[-59:])
-    fig.colorbar(lc, ax=ax_path, label="path speed while cutting [mm/s]  (rapids: grey dashes)", shrink=0.7)
+    fig.colorbar(lc, ax=ax_path, label="path speed while the laser is on [mm/s]  (off: grey dashes)", shrink=0.7)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     moving = np.ptp(ser["p"], axis=0) > 0
     for row, (name, unit) in enumerate((("v", "mm/s"), ("a", "mm/s²"), ("j", "mm/s³"))):

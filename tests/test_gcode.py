@@ -149,7 +149,7 @@ def test_start_position_and_g40_g17_g94():
         ("G2 X1 F60", 1, 1, "needs I/J"),
         ("G2 X10 R2 F60", 1, 8, "smaller than half the chord"),
         ("G18 G2 X1 F60", 1, 1, "G18 (XZ plane) is not supported yet"),
-        ("G5.2 X1", 1, 1, "NURBS is not supported yet"),
+        ("G92 X1", 1, 1, "G92 is not supported yet"),
         ("G1.5 X1", 1, 1, "unknown or unsupported word G1.5"),
         ("N1.5 G1 X1 F60", 1, 1, "non-negative integer"),
         ("G1 X1 F60 @", 1, 11, "unexpected character"),
@@ -248,3 +248,105 @@ def test_fuzz_mutated_corpus(data):
         parse("\n".join(lines))
     except SourceError as e:
         assert 1 <= e.line <= len(lines)
+
+
+# ---- spline blocks (LinuxCNC dialect) -------------------------------------------------------
+
+
+def test_g5_cubic_and_tangent_continuation():
+    p = parse("G1 X0 Y0 F600\nG5 I0 J3 P0 Q-3 X1 Y1\nG5 P0 Q-3 X2 Y2\n")
+    assert list(p.kind[1:]) == [Kind.CURVE, Kind.CURVE]
+    deg, pts, w, knots = p.curves.curve(0)
+    assert deg == 3 and list(knots) == [0, 0, 0, 0, 1, 1, 1, 1]
+    np.testing.assert_allclose(pts[:, :2], [[0, 0], [0, 3], [1, -2], [1, 1]])
+    _, pts2, _, _ = p.curves.curve(1)
+    np.testing.assert_allclose(pts2[:, :2], [[1, 1], [1, 4], [2, -1], [2, 2]])  # I J = -(previous P Q)
+    np.testing.assert_allclose(p.end[-1], [2, 2, 0])
+
+
+def test_g5_1_quadratic():
+    p = parse("G0 X-2 Y4\nG5.1 X2 I2 J-8 F600\n")
+    deg, pts, _, _ = p.curves.curve(0)
+    assert deg == 2
+    np.testing.assert_allclose(pts[:, :2], [[-2, 4], [0, -4], [2, 4]])
+
+
+def test_g5_2_nurbs_block():
+    p = parse("G1 X0 Y0 F600\nG5.2 P2\nX1 Y1 P3 L4\nX2 Y0\nX3 Y1\nX4 Y0\nG5.3\nG1 X5\n")
+    deg, pts, w, knots = p.curves.curve(0)
+    assert deg == 3
+    np.testing.assert_allclose(pts[:, :2], [[0, 0], [1, 1], [2, 0], [3, 1], [4, 0]])
+    np.testing.assert_allclose(w, [2, 3, 1, 1, 1])
+    np.testing.assert_allclose(knots, [0, 0, 0, 0, 1, 2, 2, 2, 2])
+    assert p.kind[-1] == Kind.LINE and p.start[-1][0] == 4
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "needle"),
+    [
+        ("G1 X0 F60\nG5 X1 Y1 P0 Q1\n", 2, "first G5 of a series needs I and J"),
+        ("G1 X0 F60\nG5 X1 Y1 I1 P0 Q1\n", 2, "I and J go together"),
+        ("G1 X0 F60\nG5 X1 Y1 I1 J1\n", 2, "G5 needs P and Q"),
+        ("G1 X0 F60\nG5.1 X1 Y1\n", 2, "needs a non-zero I, J"),
+        ("G1 X0 F60\nG5.2 X1 Y1\nX2 Y0\nX3 Y3\n", 2, "not closed with G5.3"),
+        ("G1 X0 F60\nG5.2 X1 Y1\nG1 X3\n", 3, "not closed with G5.3"),
+        ("G1 X0 F60\nG5.3\n", 2, "G5.3 without an open G5.2"),
+        ("G1 X0 F60\nG5.2 X1 Y1\nG5.3\n", 2, "needs at least 3 control points"),
+        ("G1 X0 F60\nG5.2 X1 Y1 Z2\nG5.3\n", 2, "X and Y only"),
+        ("G1 X0 F60\nG6.2 X0 Y0 R1 K0 P3\nX1 Y1 K0\nX2 Y0 K0\nG6.2 K1\n", 2, "need 6"),
+        ("G1 X0 F60\nG6.2 X0 Y0 R1 K0 P3 Q2\n", 2, "Q2 is not supported"),
+        ("G1 X0 F60\nG6.2 X5 Y0 R1 K0 P3\n", 2, "starts at its first control point"),
+        ("G1 X0 F60\nG6.2 X0 Y0 R1 K1 P3\nX1 Y1 K0\n", 3, "smaller than the previous knot"),
+        ("G1 X0 F60\nG6.2 X0 Y0 K0 P3\nX1 Y1 K0\nX2 Y0 K1\nG6.2 K1\nG6.2 K1\nG6.2 K1\n", 2, "clamped"),
+    ],
+)
+def test_spline_errors(text, line, needle):
+    e = err(text)
+    assert e.line == line and needle in e.reason, str(e)
+
+
+def test_g6_2_nurbs_with_knots_plans_and_checks(tmp_path):
+    from tests.conftest import make_machine
+    from tests.helpers import table_of
+
+    text = (
+        "G1 X0 Y0 F600\nG6.2 X0 Y0 R1 K0 P3 Q1\nX10 Y10 R2 K0\nX20 Y0 R1 K0\nX30 Y10 R1 K1\n"
+        "G6.2 K2\nG6.2 K2\nG6.2 K2\nG1 X40\n"
+    )
+    p = parse(text)
+    deg, pts, w, knots = p.curves.curve(0)
+    assert deg == 2 and list(knots) == [0, 0, 0, 1, 2, 2, 2] and list(w) == [1, 2, 1, 1]
+    _, _, meas = table_of(text, make_machine(), tmp_path)
+    assert meas.ok, meas.violations
+
+
+@pytest.mark.parametrize(
+    ("name", "json_name"),
+    [
+        ("butterfly-xy", "lcnc_g52_butterfly_xy.json"),
+        ("Curva_Farfalla", "lcnc_g62_Curva_Farfalla_1_1.json"),
+    ],
+)
+def test_corpus_nurbs_equal_their_json(name, json_name):
+    import json
+
+    from tests.conftest import CORPUS
+
+    p = load_gcode(corpus_file(name))
+    blocks = json.loads((CORPUS / "nurbs" / json_name).read_text())["blocks"]
+    assert len(p.curves) == len(blocks)
+    for i, blk in enumerate(blocks):
+        deg, pts, w, knots = p.curves.curve(i)
+        assert deg == blk["degree"]
+        np.testing.assert_allclose(pts[:, :2], blk["control_points"], atol=1e-12)
+        np.testing.assert_allclose(w, blk["weights"])
+        np.testing.assert_allclose(knots, blk["knots"])
+
+
+def test_corpus_nurbs_programs_plan_and_check(tmp_path):
+    from tests.conftest import make_machine
+    from tests.helpers import table_of
+
+    for name in ("butterfly-xy", "Curva_Farfalla"):
+        _, table, meas = table_of(corpus_file(name).read_text(), make_machine(), tmp_path, name + ".ticks")
+        assert meas.ok, meas.violations

@@ -21,7 +21,8 @@ import numpy as np
 
 from jaxcnc.errors import SourceError
 from jaxcnc.gcode.lexer import Word, tokenize
-from jaxcnc.program import Event, Kind, LaserMode, Program, program_from_columns
+from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
+from jaxcnc.program import Event, Kind, LaserMode, Program, make_curve_table, program_from_columns
 
 MM_PER_INCH = 25.4
 #: Largest allowed difference between the start and end radius of an IJ arc (mm), as in
@@ -47,25 +48,35 @@ _G_GROUP = {
     610: 13,
     611: 13,
     640: 13,
+    50: 1,
+    51: 1,
+    52: 1,
+    53: 1,
+    62: 1,
+    540: 12,
+    550: 12,
+    560: 12,
+    570: 12,
+    580: 12,
+    590: 12,
+    591: 12,
+    592: 12,
+    593: 12,
 }
 _M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7}
 _NOT_YET = {
     180: "G18 (XZ plane)",
     190: "G19 (YZ plane)",
-    50: "G5 cubic splines",
-    51: "G5.1 splines",
-    52: "G5.2 NURBS",
-    62: "G6.2 NURBS",
     530: "G53",
     920: "G92",
-    540: "work offset G54",
     901: "G90.1",
     911: "G91.1",
     410: "cutter compensation G41",
     420: "cutter compensation G42",
 }
 _AXES = ("X", "Y", "Z")
-_ALLOWED = set("GMFSTNPQXYZIJKR")
+_ALLOWED = set("GMFSTNPQXYZIJKRL")
+_SPLINE_CODES = (50, 51, 52, 62)
 
 
 @dataclass
@@ -81,6 +92,9 @@ class _State:
     exact_stop: bool = False  # G61.1
     blend_tol: float = math.inf  # G64 without P (LinuxCNC's start-up mode)
     pending_stop: bool = True
+    g5_last_pq: np.ndarray | None = None  # P, Q of the previous G5 (for tangent continuation)
+    nurbs: NurbsBlock | None = None  # a G5.2 / G6.2 curve being read
+    curves: list = field(default_factory=list)
     rows: dict[str, list] = field(
         default_factory=lambda: {
             k: []
@@ -100,6 +114,7 @@ class _State:
                 "event",
                 "event_value",
                 "line",
+                "curve",
             )
         }
     )
@@ -191,6 +206,7 @@ class _Interpreter:
         dwell_s: float = 0.0,
         event: int = 0,
         event_value: int = 0,
+        curve: int = -1,
     ) -> None:
         s, r = self.s, self.s.rows
         end = s.pos if end is None else end
@@ -209,6 +225,7 @@ class _Interpreter:
         r["event"].append(event)
         r["event_value"].append(event_value)
         r["line"].append(line)
+        r["curve"].append(curve)
         s.pos = np.asarray(end, dtype=np.float64).copy()
         # Rows that stand still (dwell, events) leave the machine at rest for the next one.
         s.pending_stop = kind in (Kind.DWELL, Kind.EVENT)
@@ -268,14 +285,27 @@ class _Interpreter:
         if b.has_g(910) is not None:
             s.absolute = False
         # motion mode
+        # work coordinate systems G54-G59.3: no offsets are set (G10 is not supported), so each is
+        # the machine system; selecting one is accepted and changes nothing
         motion_word = None
-        for code in (0, 10, 20, 30):
+        for code in (0, 10, 20, 30, *_SPLINE_CODES):
             if (w := b.has_g(code)) is not None:
+                if s.nurbs is not None and s.nurbs.kind == "G5.2" and code != 52:
+                    raise b.error(w, f"G5.2 NURBS opened at line {s.nurbs.line} is not closed with G5.3")
                 s.motion, motion_word = code, w
         axes = b.axis_words()
         for letter in _AXES:
             b.take(letter)
-        if (g28 := b.has_g(280)) is not None:
+        if (g53 := b.has_g(53)) is not None:
+            if s.nurbs is None or s.nurbs.kind != "G5.2":
+                raise b.error(g53, "G5.3 without an open G5.2 NURBS")
+            if axes:
+                raise b.error(next(iter(axes.values())), "G5.3 takes no axis words")
+            self.finish_nurbs(b)
+            s.motion = None
+        elif s.motion in _SPLINE_CODES and (axes or motion_word is not None):
+            self.spline(b, axes, motion_word)
+        elif (g28 := b.has_g(280)) is not None:
             if motion_word is not None and axes:
                 raise b.error(g28, "G28 and a motion G code in one block both claim the axis words")
             self.home_move(b, axes)
@@ -386,6 +416,165 @@ class _Interpreter:
         center = np.array([c2[0], c2[1], start[2]])
         self.emit(Kind.ARC, b.line, end, center=center, turn=-1 if cw else 1, feed=self.feed_mm_s(b, first))
 
+    # -- splines -------------------------------------------------------------------------------
+    def spline(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
+        s = self.s
+        first = motion_word or next(iter(axes.values()))
+        if 2 in axes:
+            raise b.error(axes[2], "spline blocks move X and Y only (Z is not allowed)")
+        if s.motion in (50, 51):
+            self.bezier(b, axes, first, cubic=s.motion == 50)
+        elif s.motion == 52:
+            self.g52(b, axes, motion_word, first)
+        else:
+            self.g62(b, axes, motion_word, first)
+
+    def _xy(self, b: _Block, letters: str) -> np.ndarray | None:
+        """The offset ``(I, J)`` or ``(P, Q)`` in mm (None when both are absent)."""
+        w1, w2 = b.take(letters[0]), b.take(letters[1])
+        if w1 is None and w2 is None:
+            return None
+        if w1 is None or w2 is None:
+            w = w1 or w2
+            raise b.error(w, f"{letters[0]} and {letters[1]} go together; only {w.letter} is given")
+        return np.array([w1.value, w2.value, 0.0]) * self.s.scale
+
+    def bezier(self, b: _Block, axes: dict[int, Word], first: Word, cubic: bool) -> None:
+        s = self.s
+        if not axes:
+            raise b.error(first, "spline needs its end point (X and/or Y)")
+        end = self.target(axes)
+        p0 = s.pos.copy()
+        ij = self._xy(b, "IJ")
+        if cubic:
+            pq = self._xy(b, "PQ")
+            if pq is None:
+                raise b.error(first, "G5 needs P and Q (second control point relative to the end)")
+            if ij is None:
+                if s.g5_last_pq is None:
+                    raise b.error(first, "the first G5 of a series needs I and J")
+                ij = -s.g5_last_pq
+            pts = np.stack([p0, p0 + ij, end + pq, end])
+            s.g5_last_pq = pq
+        else:
+            if ij is None or not np.any(ij):
+                raise b.error(first, "G5.1 needs a non-zero I, J (control point relative to the start)")
+            pts = np.stack([p0, p0 + ij, end])
+        self.add_curve(b, first, bezier_curve(pts), end)
+
+    def g52(self, b: _Block, axes: dict[int, Word], motion_word: Word | None, first: Word) -> None:
+        s = self.s
+        p, order = b.take("P"), b.take("L")
+        if p is not None and p.value <= 0:
+            raise b.error(p, f"NURBS weight P{p.text} must be positive")
+        if s.nurbs is None:
+            if motion_word is None:
+                raise b.error(first, "control point outside a G5.2 NURBS block")
+            k = 3 if order is None else order.value
+            if k != int(k) or not 2 <= k <= 8:
+                raise b.error(order, f"NURBS order L{order.text} must be an integer from 2 to 8")
+            s.nurbs = NurbsBlock("G5.2", b.line, motion_word.column, int(k), [s.pos.copy()], [1.0])
+            if not axes:  # "G5.2 P-": the weight of the first control point (the current position)
+                if p is not None:
+                    s.nurbs.weights[0] = p.value
+                return
+        elif order is not None:
+            if len(s.nurbs.points) > 1:
+                raise b.error(order, "the order L is given before the second control point only")
+            if order.value != int(order.value) or not 2 <= order.value <= 8:
+                raise b.error(order, f"NURBS order L{order.text} must be an integer from 2 to 8")
+            s.nurbs.order = int(order.value)
+        if not axes:
+            raise b.error(first, "G5.2 block without a control point")
+        s.nurbs.points.append(self.target(axes))
+        s.nurbs.weights.append(1.0 if p is None else p.value)
+        s.pos = s.nurbs.points[-1].copy()  # incremental coordinates continue from the last point
+
+    def g62(self, b: _Block, axes: dict[int, Word], motion_word: Word | None, first: Word) -> None:
+        s = self.s
+        p, k, r, q = b.take("P"), b.take("K"), b.take("R"), b.take("Q")
+        if s.nurbs is None or s.nurbs.complete:
+            if p is None:
+                raise b.error(first, "G6.2 starts a NURBS with P (order)")
+            if p.value != int(p.value) or not 2 <= p.value <= 8:
+                raise b.error(p, f"NURBS order P{p.text} must be an integer from 2 to 8")
+            if q is not None and q.value != 1:
+                raise b.error(q, f"G6.2 Q{q.text} is not supported (only Q1)")
+            s.nurbs = NurbsBlock("G6.2", b.line, first.column, int(p.value))
+            self._g62_start = s.pos.copy()
+        elif p is not None or q is not None:
+            raise b.error(p or q, "P and Q are given on the first G6.2 block only")
+        if k is None:
+            raise b.error(first, "each G6.2 block needs its knot K")
+        if s.nurbs.knots and k.value < s.nurbs.knots[-1]:
+            raise b.error(k, f"knot K{k.text} is smaller than the previous knot {s.nurbs.knots[-1]:g}")
+        s.nurbs.knots.append(k.value)
+        if axes:
+            if len(s.nurbs.knots) > len(s.nurbs.points) + 1:
+                raise b.error(first, "control point after the trailing knot-only G6.2 blocks")
+            if r is not None and r.value <= 0:
+                raise b.error(r, f"NURBS weight R{r.text} must be positive")
+            s.nurbs.points.append(self.target(axes))
+            s.nurbs.weights.append(1.0 if r is None else r.value)
+            if len(s.nurbs.points) == 1 and np.linalg.norm(s.nurbs.points[0] - self._g62_start) > 1e-6:
+                raise b.error(
+                    first, "a G6.2 NURBS starts at its first control point: program it at the current position"
+                )
+            s.pos = s.nurbs.points[-1].copy()
+        elif r is not None:
+            raise b.error(r, "weight R without a control point")
+        if s.nurbs.complete:
+            s.pos = self._g62_start
+            self.finish_nurbs(b)
+
+    def finish_nurbs(self, b: _Block) -> None:
+        s = self.s
+        nb = s.nurbs
+        s.nurbs = None
+        if nb.kind == "G5.2":
+            s.pos = nb.points[0].copy()
+        if len(nb.points) < nb.order:
+            raise SourceError(
+                self.file,
+                nb.line,
+                nb.column,
+                f"{nb.kind} NURBS of order {nb.order} needs at least {nb.order} control points, got {len(nb.points)}",
+            )
+        self.add_curve(b, None, nb.curve(), nb.points[-1], line=nb.line, column=nb.column)
+
+    def add_curve(
+        self,
+        b: _Block,
+        word: Word | None,
+        curve: tuple,
+        end: np.ndarray,
+        line: int | None = None,
+        column: int | None = None,
+    ) -> None:
+        try:
+            make_curve_table([curve])
+        except ValueError as exc:
+            msg = str(exc).removeprefix("curve 0: ")
+            raise SourceError(self.file, line or b.line, column or (word.column if word else 0), msg) from None
+        s = self.s
+        s.curves.append(curve)
+        feed = self.feed_mm_s(b, word or next(iter(b.vals.values()), None))
+        self.emit(Kind.CURVE, line or b.line, end, feed=feed, curve=len(s.curves) - 1)
+
+    def close(self) -> None:
+        """End of the program text: nothing may be left open."""
+        nb = self.s.nurbs
+        if nb is not None and not (nb.kind == "G6.2" and nb.complete):
+            what = (
+                "is not closed with G5.3"
+                if nb.kind == "G5.2"
+                else (
+                    f"has {len(nb.knots)} knots; {len(nb.points)} control points of order {nb.order} need "
+                    f"{len(nb.points) + nb.order}"
+                )
+            )
+            raise SourceError(self.file, nb.line, nb.column, f"{nb.kind} NURBS {what}")
+
     def program(self) -> dict[str, np.ndarray]:
         r = self.s.rows
         out = {k: np.asarray(v) for k, v in r.items()}
@@ -427,7 +616,9 @@ def parse_gcode(
         it.block(_Block(words, file, line_no))
         if it.ended:
             break
-    return program_from_columns(file=file, **it.program())
+    it.close()
+    curves = make_curve_table(it.s.curves) if it.s.curves else None
+    return program_from_columns(file=file, curves=curves, **it.program())
 
 
 def load_gcode(path: str | Path, **kwargs) -> Program:
