@@ -300,3 +300,30 @@ def test_length_error_bound_reported():
     assert sp.length[c].sum() == pytest.approx(scipy_length(curve), abs=1e-8)
     assert np.all(sp.length_err[c] <= 1e-9)
     assert math.isfinite(sp.kappa_max[c].max())
+
+
+@pytest.mark.parametrize(("turns_deg", "rise", "cw"), [(360.0, 2.0, False), (90.0, 0.5, True), (270.0, -7.0, False)])
+def test_helix_within_stated_tolerance(tmp_path, turns_deg, rise, cw):
+    from jaxcnc.gcode import parse_gcode
+    from jaxcnc.geometry.spans import HELIX_TOL_MM
+
+    r = 5.0
+    a1 = np.radians(turns_deg) * (-1 if cw else 1)
+    end = (r * np.cos(a1), r * np.sin(a1))
+    text = f"G0 X{r} Y0 Z0\n{'G2' if cw else 'G3'} X{end[0]:.12f} Y{end[1]:.12f} Z{rise} I{-r} J0 F600\n"
+    prog = parse_gcode(text, "helix.ngc")
+    sp = build_spans(prog)
+    c = np.flatnonzero(sp.kind == SpanKind.CURVE)
+    idx = np.repeat(c, 400)
+    u = np.tile(np.linspace(0, 1, 400), c.size)
+    (p,) = evaluate(jnp.asarray(sp.coeffs[idx]), jnp.asarray(sp.origin[idx]), jnp.asarray(u))
+    p = np.asarray(p)
+    assert np.max(np.abs(np.hypot(p[:, 0], p[:, 1]) - r)) <= 1e-9  # on the cylinder exactly
+    ang = np.unwrap(np.arctan2(p[:, 1], p[:, 0]))
+    z_true = rise * ang / a1
+    assert np.max(np.abs(p[:, 2] - z_true)) <= HELIX_TOL_MM
+    total = np.hypot(r * abs(a1), rise)
+    assert sp.length[c].sum() == pytest.approx(total, abs=1e-3)
+    job, table, meas = table_of_program(prog, make_machine(), tmp_path)
+    assert meas.ok, meas.violations
+    np.testing.assert_array_equal(table.positions[-1], np.round(np.array([*end, rise]) / 1e-3))

@@ -143,7 +143,6 @@ def test_start_position_and_g40_g17_g94():
         ("G4", 1, 1, "needs P"),
         ("X1", 1, 1, "no motion mode"),
         ("G1 X1 F60 P2", 1, 11, "no meaning"),
-        ("G2 X1 Y1 Z1 I1 F60", 1, 10, "helical"),
         ("G2 X1 Y1 I1 R1 F60", 1, 13, "both R and I/J"),
         ("G3 X1 Y1 K1 F60", 1, 10, "K has no meaning"),
         ("G2 X1 F60", 1, 1, "needs I/J"),

@@ -369,8 +369,6 @@ class _Interpreter:
     def arc(self, b: _Block, end: np.ndarray, first: Word, cw: bool) -> None:
         s = self.s
         start = s.pos
-        if abs(end[2] - start[2]) > 1e-12:
-            raise b.error(b.vals.get("Z", first), "helical arcs (Z motion in G2/G3) are not supported yet")
         i, j, k, r = b.take("I"), b.take("J"), b.take("K"), b.take("R")
         if k is not None:
             raise b.error(k, "K has no meaning for an arc in the XY plane (G17)")

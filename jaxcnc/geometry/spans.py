@@ -34,6 +34,10 @@ from jaxcnc.program import Kind, Program
 DEGREE_BUCKETS = (2, 3, 5, 7)
 #: Motion rows shorter than this (mm) move nothing and produce no span.
 MIN_LENGTH_MM = 1e-9
+#: Helical arcs are represented within this distance (mm) of the true helix.
+HELIX_TOL_MM = 1e-4
+#: z departure from "linear in the angle" of a 90° rational quadratic piece, per unit rise.
+HELIX_Z_ERR = 0.0211
 
 
 class SpanKind(IntEnum):
@@ -199,18 +203,9 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return np.where(use, v / np.where(use, n, 1.0), fallback / np.where(f > 0, f, 1.0))
 
 
-def _curve_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndarray]:
-    """B-spline / NURBS rows → certified rational Bézier pieces."""
-    coeffs, origin, owner = [], [], []
-    for r in rows:
-        deg, pts, wts, kns = p.curves.curve(int(p.curve[r]))
-        bp, bw, _ = nurbs_to_bezier(deg, pts, wts, kns)
-        moving = np.ptp(bp, axis=1).max(axis=1) > MIN_LENGTH_MM  # drop pieces that do not move
-        bp, bw = bp[moving], bw[moving]
-        coeffs.append(elevate(homogeneous_power(bp, bw, bp[:, 0]), degree))
-        origin.append(bp[:, 0])
-        owner.append(np.full(bp.shape[0], r))
-    fit = refine_curved(np.concatenate(coeffs), np.concatenate(origin), np.concatenate(owner))
+def _certified(coeffs: np.ndarray, origin: np.ndarray, owner: np.ndarray) -> dict[str, np.ndarray]:
+    """Curve pieces → certified spans (subdivided until length and ``u(s)`` fits converge)."""
+    fit = refine_curved(coeffs, origin, owner)
     c = fit["coeffs"]
     _, d1_0, d2_0 = (x[:, 0] for x in derivatives(c, np.zeros((c.shape[0], 1)), 2))
     _, d1_1, d2_1 = (x[:, 0] for x in derivatives(c, np.ones((c.shape[0], 1)), 2))
@@ -232,6 +227,61 @@ def _curve_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndar
         cheb_s=fit["cheb_s"],
         cheb_u=fit["cheb_u"],
     )
+
+
+def _curve_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndarray]:
+    """B-spline / NURBS rows → certified rational Bézier pieces."""
+    coeffs, origin, owner = [], [], []
+    for r in rows:
+        deg, pts, wts, kns = p.curves.curve(int(p.curve[r]))
+        bp, bw, _ = nurbs_to_bezier(deg, pts, wts, kns)
+        moving = np.ptp(bp, axis=1).max(axis=1) > MIN_LENGTH_MM  # drop pieces that do not move
+        bp, bw = bp[moving], bw[moving]
+        coeffs.append(elevate(homogeneous_power(bp, bw, bp[:, 0]), degree))
+        origin.append(bp[:, 0])
+        owner.append(np.full(bp.shape[0], r))
+    return _certified(np.concatenate(coeffs), np.concatenate(origin), np.concatenate(owner))
+
+
+def _helix_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndarray]:
+    """Helical arcs (XY arc with Z moving in proportion to the angle), within ``HELIX_TOL_MM``.
+
+    Each piece is the exact rational quadratic of its XY arc with ``z`` control values
+    ``z0, (z0 + z2)/2, z2``; its ``z`` then departs from "linear in the angle" by at most
+    ``0.0211 · (φ / 90°)² · Δz`` (measured over the piece's parameter), so a helix of sweep ``Φ``
+    and rise ``H`` is cut into ``n ≥ cbrt(0.0211 (Φ / 90°)² |H| / HELIX_TOL_MM)`` equal pieces
+    (and at least one per 90°). The pieces are certified like spline pieces.
+    """
+    s, e, c, turn = p.start[rows], p.end[rows], p.center[rows], p.turn[rows].astype(np.float64)
+    r = np.hypot(*(s - c)[:, :2].T)
+    th_s = np.arctan2(*(s - c)[:, 1::-1].T)
+    th_e = np.arctan2(*(e - c)[:, 1::-1].T)
+    sweep = np.mod(turn * (th_e - th_s), 2 * np.pi)
+    sweep = np.where(np.hypot(*(e - s)[:, :2].T) < MIN_LENGTH_MM, 2 * np.pi, sweep)
+    rise = e[:, 2] - s[:, 2]
+    quarters = np.ceil(sweep / (np.pi / 2) - 1e-12)
+    by_tol = np.ceil(np.cbrt(HELIX_Z_ERR * (sweep / (np.pi / 2)) ** 2 * np.abs(rise) / HELIX_TOL_MM))
+    n_pieces = np.maximum(1, np.maximum(quarters, by_tol)).astype(np.int64)
+    idx = np.repeat(np.arange(len(rows)), n_pieces)
+    j = np.arange(idx.size) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces)
+    n = n_pieces[idx]
+    phi = (sweep / n_pieces)[idx]
+    tn, rr, cc = turn[idx], r[idx], c[idx]
+    a0 = th_s[idx] + tn * j * phi
+    a1 = th_s[idx] + tn * (j + 1) * phi
+    am = a0 + tn * phi / 2
+    z0 = s[idx, 2] + rise[idx] * j / n
+    z2 = s[idx, 2] + rise[idx] * (j + 1) / n
+
+    def point(angle: np.ndarray, z: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
+        return np.stack([cc[:, 0] + rr * scale * np.cos(angle), cc[:, 1] + rr * scale * np.sin(angle), z], axis=1)
+
+    w1 = np.cos(phi / 2)
+    p0, p1, p2 = point(a0, z0), point(am, (z0 + z2) / 2, 1.0 / w1), point(a1, z2)
+    p0[j == 0] = s[idx[j == 0]]  # the programmed points, bit for bit
+    p2[j == n - 1] = e[idx[j == n - 1]]
+    coeffs, origin = _quadratic(p0, p1, p2, w1)
+    return _certified(elevate(coeffs, degree), origin, rows[idx])
 
 
 def _point_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -289,20 +339,23 @@ def build_spans(program: Program) -> Spans:
     """
     kind = program.kind
     degree = span_degree(program)
-    has_curves = bool(np.any(kind == Kind.CURVE))
-    n_cheb = (CHEB_N + 1, CHEB_N) if has_curves else (0, 0)
     move_len = np.linalg.norm(program.end - program.start, axis=1)
     is_line = (kind == Kind.LINE) & (move_len > MIN_LENGTH_MM)
     parts = []
+    helical = (kind == Kind.ARC) & (np.abs(program.end[:, 2] - program.start[:, 2]) > MIN_LENGTH_MM)
+    has_curves = bool(np.any(kind == Kind.CURVE)) or bool(helical.any())
+    n_cheb = (CHEB_N + 1, CHEB_N) if has_curves else (0, 0)
     for build, mask in (
         (_line_spans, is_line),
-        (_arc_spans, kind == Kind.ARC),
+        (_arc_spans, (kind == Kind.ARC) & ~helical),
         (_point_spans, (kind == Kind.DWELL) | (kind == Kind.EVENT)),
     ):
         if mask.any():
             parts.append(build(program, np.flatnonzero(mask)))
-    if has_curves:
+    if np.any(kind == Kind.CURVE):
         parts.append(_curve_spans(program, np.flatnonzero(kind == Kind.CURVE), degree))
+    if helical.any():
+        parts.append(_helix_spans(program, np.flatnonzero(helical), degree))
     if not parts:
         parts.append(_point_spans(program, np.zeros(0, np.int64)))
     cols = {}
