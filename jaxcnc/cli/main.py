@@ -216,6 +216,23 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0 if meas.ok else 1
 
 
+def cmd_expand(args: argparse.Namespace) -> int:
+    from jaxcnc.errors import SourceError
+    from jaxcnc.gcode.preprocess import expand_text
+
+    path = Path(args.program)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SourceError(str(path), 0, 0, f"cannot read program: {exc}") from None
+    flat = expand_text(text, str(path), max_lines=args.max_lines)
+    if args.output:
+        Path(args.output).write_text(flat)
+    else:
+        sys.stdout.write(flat)
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from jaxcnc.bench import run_benchmarks, run_geometry_benchmarks
 
@@ -293,6 +310,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sp.add_argument("--out", default="jaxcnc-demo", help="folder for the demo's files (default: %(default)s)")
     sp.set_defaults(func=cmd_demo)
+
+    sp = sub.add_parser(
+        "expand",
+        help="print a parametric program flattened to plain ISO-7bit",
+        description="Run the preprocessor on PROGRAM: parameters, [expressions] and O-word subroutines, "
+        "conditions and loops are executed and the plain ISO-7bit blocks they produce are printed. The "
+        "result plans exactly like the original.",
+    )
+    sp.add_argument("program", help="G-code program")
+    sp.add_argument("--output", "-o", help="write here instead of standard output")
+    sp.add_argument("--max-lines", type=int, default=10_000_000, help="stop after this many executed lines")
+    sp.set_defaults(func=cmd_expand)
 
     sp = sub.add_parser(
         "bench",

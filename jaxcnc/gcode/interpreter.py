@@ -14,6 +14,7 @@ comments, ``%`` delimiters.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import numpy as np
 
 from jaxcnc.errors import SourceError
 from jaxcnc.gcode.lexer import Word, tokenize
+from jaxcnc.gcode.preprocess import MAX_DEPTH, MAX_LINES, expand
 from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
 from jaxcnc.program import Event, Kind, LaserMode, Program, make_curve_table, program_from_columns
 
@@ -77,6 +79,7 @@ _NOT_YET = {
 _AXES = ("X", "Y", "Z")
 _ALLOWED = set("GMFSTNPQXYZIJKRL")
 _SPLINE_CODES = (50, 51, 52, 62)
+_NEEDS_PREPROCESSOR = re.compile(r"[#\[\]]|^\s*/?\s*[oO]", re.MULTILINE)
 
 
 @dataclass
@@ -587,27 +590,46 @@ def parse_gcode(
     *,
     start: tuple[float, ...] | np.ndarray = (0.0, 0.0, 0.0),
     home: tuple[float, ...] | np.ndarray | None = None,
+    block_delete: bool = False,
+    max_depth: int = MAX_DEPTH,
+    max_lines: int = MAX_LINES,
 ) -> Program:
     """Interpret G-code ``text`` into a Program.
+
+    Parametric programs (parameters, expressions, O-words) are flattened first by
+    :mod:`jaxcnc.gcode.preprocess`.
 
     Args:
         text: the program.
         file: its name, used in error messages and kept in the Program.
         start: machine position (x, y, z) in mm when the program starts.
         home: G28 home position (x, y, z) in mm; defaults to ``start``.
+        block_delete: the block delete switch: when on, blocks starting with ``/`` are skipped.
+        max_depth, max_lines: limits on subroutine nesting and executed lines.
 
     Raises:
         SourceError: naming ``file:line:column``, the word and the reason.
     """
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
     it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr)
-    percent_seen = False
-    for line_no, raw in enumerate(text.splitlines(), 1):
-        if raw.strip() == "%":
-            if percent_seen:
-                break  # the second '%' ends the program
-            percent_seen = True
-            continue
+    if _NEEDS_PREPROCESSOR.search(text):
+        blocks = [(e.text, e.line) for e in expand(text, file, max_depth=max_depth, max_lines=max_lines)]
+    else:
+        blocks = []
+        percent_seen = False
+        for line_no, raw in enumerate(text.splitlines(), 1):
+            if raw.strip() == "%":
+                if percent_seen:
+                    break  # the second '%' ends the program
+                percent_seen = True
+                continue
+            blocks.append((raw, line_no))
+    for raw, line_no in blocks:
+        stripped = raw.lstrip()
+        if stripped.startswith("/"):
+            if block_delete:
+                continue  # block delete switch on: the block is skipped
+            raw = raw.replace("/", " ", 1)
         words, _comments = tokenize(raw, file, line_no)
         if not words:
             continue

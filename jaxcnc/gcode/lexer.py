@@ -62,17 +62,21 @@ def tokenize(raw: str, file: str, line_no: int) -> tuple[list[Word], list[str]]:
         col = cols[i]
         if not c.isascii() or not c.isalpha():
             if c in "#[]":
-                raise SourceError(file, line_no, col, f"parametric programming ({c!r}) is not supported yet")
+                raise SourceError(
+                    file,
+                    line_no,
+                    col,
+                    f"unexpected {c!r}: parameters and [expressions] are values "
+                    "of words (X[#1 + 2]) or assignments (#1 = 2)",
+                )
             if c == "/":
-                raise SourceError(file, line_no, col, "block delete '/' is not supported yet")
+                raise SourceError(file, line_no, col, "block delete '/' must start the block")
             shown = c if c.isprintable() else repr(c)
             raise SourceError(file, line_no, col, f"unexpected character {shown!r}: expected a word such as G1 or X10")
         letter = c.upper()
         m = _NUMBER.match(text, i + 1)
         if m is None and i + 1 < n and text[i + 1] in "#[":
-            raise SourceError(
-                file, line_no, cols[i + 1], f"parametric programming ({text[i + 1]!r}) is not supported yet"
-            )
+            raise SourceError(file, line_no, cols[i + 1], f"unexpected {text[i + 1]!r} after {c.upper()!r}")
         if m is None:
             rest = text[i + 1 : i + 9]
             raise SourceError(
@@ -85,7 +89,7 @@ def tokenize(raw: str, file: str, line_no: int) -> tuple[list[Word], list[str]]:
         if end < n and (text[end] == "." or text[end].isdigit()):
             raise SourceError(file, line_no, col, f"malformed number {text[i + 1 : end + 1]!r} after {letter!r}")
         if letter == "O":
-            raise SourceError(file, line_no, col, "O-word subroutines and control flow are not supported yet")
+            raise SourceError(file, line_no, col, "an O-word must start its line (O100 sub, O100 if [...], ...)")
         words.append(Word(letter, float(m.group(0)), m.group(0), col))
         i = end
     return words, comments
