@@ -35,6 +35,7 @@ class Event(IntEnum):
     OPTIONAL_STOP = 2  # M1: pause if the optional-stop switch is on
     TOOL_CHANGE = 3  # M6: change to tool ``event_value``
     PROGRAM_END = 4  # M2 / M30
+    COOLANT = 5  # M7 / M8 / M9 (assist gas on a laser): ``event_value`` is 7, 8 or 9
 
 
 class LaserMode(IntEnum):

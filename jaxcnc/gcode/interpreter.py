@@ -6,9 +6,11 @@ turns every supported word into its proper meaning and refuses everything else w
 :class:`~jaxcnc.errors.SourceError` naming ``file:line:column`` and the word — nothing is
 silently ignored.
 
-Supported here: G0 G1 G2 G3 (XY-plane arcs in IJ or R form, full circles), G4, G17, G20 G21,
-G28, G40, G61 G61.1 G64 (P, Q), G90 G91, G94, F, S, T, M0 M1 M2 M30, M3 M4 M5, M6, N,
-comments, ``%`` delimiters.
+Supported here: G0 G1 G2 G3 (arcs in the G17/G18/G19 planes in IJK or R form, full circles,
+helices), G4, G5 G5.1 G5.2/G5.3 G6.2 splines, G17 G18 G19, G20 G21, G28, G40, G43 H0 / G49,
+G53, G54–G59.3, G61 G61.1 G64 (P, Q), G90 G91, G90.1 G91.1, G92 G92.1 G92.2 G92.3, G94, F, S, T,
+M0 M1 M2 M30, M3 M4 M5, M6, M7 M8 M9, N, block delete, comments, ``%`` delimiters, and through the
+preprocessor parameters, expressions and O-word control flow.
 """
 
 from __future__ import annotations
@@ -27,10 +29,14 @@ from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
 from jaxcnc.program import Event, Kind, LaserMode, Program, make_curve_table, program_from_columns
 
 MM_PER_INCH = 25.4
-#: Largest allowed difference between the start and end radius of an IJ arc (mm), as in
-#: LinuxCNC's interpreter; within it the centre is moved onto the chord's bisector so the arc
-#: passes exactly through both end points.
-ARC_RADIUS_TOL_MM = 0.002
+#: Largest allowed difference between the start and end radius of an I/J/K arc, LinuxCNC's values
+#: (mm programs; inch programs use the inch value); within it the centre is moved onto the chord's
+#: bisector so the arc passes exactly through both end points.
+ARC_RADIUS_TOL_MM = 2 * 0.01 * math.sqrt(2)
+ARC_RADIUS_TOL_INCH = 2 * 0.001 * math.sqrt(2)
+#: Program axes (first, second, normal) of each arc plane; G18 is Z-X so that G3 is
+#: counter-clockwise seen from +Y, as RS274NGC defines it.
+PLANE_AXES = {17: (0, 1, 2), 18: (2, 0, 1), 19: (1, 2, 0)}
 
 # G codes in tenths (G61.1 -> 611) -> modal group, as in the RS274NGC standard.
 _G_GROUP = {
@@ -55,6 +61,17 @@ _G_GROUP = {
     52: 1,
     53: 1,
     62: 1,
+    180: 2,
+    190: 2,
+    901: 4,
+    911: 4,
+    920: 0,
+    921: 0,
+    922: 0,
+    923: 0,
+    530: 0,
+    430: 8,
+    490: 8,
     540: 12,
     550: 12,
     560: 12,
@@ -65,19 +82,13 @@ _G_GROUP = {
     592: 12,
     593: 12,
 }
-_M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7}
+_M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8}
 _NOT_YET = {
-    180: "G18 (XZ plane)",
-    190: "G19 (YZ plane)",
-    530: "G53",
-    920: "G92",
-    901: "G90.1",
-    911: "G91.1",
     410: "cutter compensation G41",
     420: "cutter compensation G42",
 }
 _AXES = ("X", "Y", "Z")
-_ALLOWED = set("GMFSTNPQXYZIJKRL")
+_ALLOWED = set("GMFSTNPQXYZIJKRLH")
 _SPLINE_CODES = (50, 51, 52, 62)
 _NEEDS_PREPROCESSOR = re.compile(r"[#\[\]]|^\s*/?\s*[oO]", re.MULTILINE)
 
@@ -95,6 +106,10 @@ class _State:
     exact_stop: bool = False  # G61.1
     blend_tol: float = math.inf  # G64 without P (LinuxCNC's start-up mode)
     pending_stop: bool = True
+    plane: int = 17
+    arc_absolute: bool = False  # G90.1: I J K are absolute centre coordinates
+    g92: np.ndarray = field(default_factory=lambda: np.zeros(3))  # G92 offset (mm)
+    g92_saved: np.ndarray = field(default_factory=lambda: np.zeros(3))
     g5_last_pq: np.ndarray | None = None  # P, Q of the previous G5 (for tangent continuation)
     nurbs: NurbsBlock | None = None  # a G5.2 / G6.2 curve being read
     curves: list = field(default_factory=list)
@@ -118,6 +133,7 @@ class _State:
                 "event_value",
                 "line",
                 "curve",
+                "plane",
             )
         }
     )
@@ -229,6 +245,7 @@ class _Interpreter:
         r["event_value"].append(event_value)
         r["line"].append(line)
         r["curve"].append(curve)
+        r["plane"].append(s.plane)
         s.pos = np.asarray(end, dtype=np.float64).copy()
         # Rows that stand still (dwell, events) leave the machine at rest for the next one.
         s.pending_stop = kind in (Kind.DWELL, Kind.EVENT)
@@ -265,7 +282,14 @@ class _Interpreter:
             if p.value < 0:
                 raise b.error(p, f"negative dwell time P{p.text}")
             self.emit(Kind.DWELL, b.line, dwell_s=p.value)
-        # G17 plane (the only one so far), units, G40 (no compensation is active: nothing to do)
+        # coolant (assist gas on a laser): an event at rest
+        for code in (7, 8, 9):
+            if b.has_m(code) is not None:
+                self.emit(Kind.EVENT, b.line, event=Event.COOLANT, event_value=code)
+        # planes, units, G40 (no compensation is ever active: nothing to do)
+        for code, plane in ((170, 17), (180, 18), (190, 19)):
+            if b.has_g(code) is not None:
+                s.plane = plane
         if b.has_g(200) is not None:
             s.scale = MM_PER_INCH
         if b.has_g(210) is not None:
@@ -282,6 +306,16 @@ class _Interpreter:
                 if w is not None and w.value < 0:
                     raise b.error(w, f"negative tolerance {w.letter}{w.text}")
             s.blend_tol = p.value * s.scale if p is not None else math.inf
+        # tool length offset: there is no tool table, so only "no offset" has a meaning
+        if b.has_g(430) is not None:
+            h = b.take("H")
+            if h is not None and h.value != 0:
+                raise b.error(h, f"tool length offset H{h.text}: no tool table is configured (only H0)")
+        # arc centre mode
+        if b.has_g(901) is not None:
+            s.arc_absolute = True
+        if b.has_g(911) is not None:
+            s.arc_absolute = False
         # distance mode
         if b.has_g(900) is not None:
             s.absolute = True
@@ -299,6 +333,25 @@ class _Interpreter:
         axes = b.axis_words()
         for letter in _AXES:
             b.take(letter)
+        if (g92 := b.has_g(920)) is not None:
+            if not axes:
+                raise b.error(g92, "G92 needs axis words")
+            if motion_word is not None:
+                raise b.error(g92, "G92 and a motion G code in one block both claim the axis words")
+            for k, w in axes.items():  # the current position now reads as the given value
+                s.g92[k] = s.pos[k] - w.value * s.scale
+            b.check_all_used()
+            return
+        for code in (921, 922):
+            if b.has_g(code) is not None:
+                if code == 922:
+                    s.g92_saved = s.g92.copy()
+                s.g92 = np.zeros(3)
+        if b.has_g(923) is not None:
+            s.g92 = s.g92_saved.copy()
+        self.machine_coords = (g53w := b.has_g(530)) is not None
+        if self.machine_coords and (s.motion not in (0, 10) or not axes):
+            raise b.error(g53w, "G53 needs G0 or G1 and axis words")
         if (g53 := b.has_g(53)) is not None:
             if s.nurbs is None or s.nurbs.kind != "G5.2":
                 raise b.error(g53, "G5.3 without an open G5.2 NURBS")
@@ -332,11 +385,21 @@ class _Interpreter:
                     self.ended = True
         b.check_all_used()
 
+    @property
+    def offset(self) -> np.ndarray:
+        """Program → machine coordinates: the G92 offset (work offsets G54–G59.3 are zero)."""
+        return self.s.g92
+
     def target(self, axes: dict[int, Word]) -> np.ndarray:
         s = self.s
         t = s.pos.copy()
         for i, w in axes.items():
-            t[i] = w.value * s.scale if s.absolute else s.pos[i] + w.value * s.scale
+            if getattr(self, "machine_coords", False):  # G53: machine coordinates, absolute
+                t[i] = w.value * s.scale
+            elif s.absolute:
+                t[i] = w.value * s.scale + self.offset[i]
+            else:
+                t[i] = s.pos[i] + w.value * s.scale
         return t
 
     def feed_mm_s(self, b: _Block, w: Word) -> float:
@@ -369,24 +432,35 @@ class _Interpreter:
         else:
             self.arc(b, end, first, cw=s.motion == 20)
 
-    def arc(self, b: _Block, end: np.ndarray, first: Word, cw: bool) -> None:
+    def arc(self, b: _Block, end_prog: np.ndarray, first: Word, cw: bool) -> None:
+        """G2/G3 in the active plane; motion along the plane's normal makes a helix."""
         s = self.s
-        start = s.pos
-        i, j, k, r = b.take("I"), b.take("J"), b.take("K"), b.take("R")
-        if k is not None:
-            raise b.error(k, "K has no meaning for an arc in the XY plane (G17)")
+        perm = PLANE_AXES[s.plane]  # (first, second, normal) program axes of the plane
+        names = "".join("XYZ"[a] for a in perm[:2])
+        offs = "".join("IJK"[a] for a in perm[:2])
+        start = s.pos[list(perm)]
+        end = end_prog[list(perm)]
+        words = {letter: b.take(letter) for letter in "IJK"}
+        r = b.take("R")
+        normal_offset = words["IJK"[perm[2]]]
+        if normal_offset is not None:
+            raise b.error(
+                normal_offset, f"{normal_offset.letter} has no meaning for an arc in the {names} plane (G{s.plane})"
+            )
+        i, j = words[offs[0]], words[offs[1]]
         if r is not None and (i is not None or j is not None):
-            raise b.error(r, "arc given both R and I/J; use one form")
+            raise b.error(r, f"arc given both R and {offs[0]}/{offs[1]}; use one form")
         chord = end[:2] - start[:2]
         d = float(np.hypot(*chord))
+        tol = ARC_RADIUS_TOL_MM if s.scale == 1.0 else ARC_RADIUS_TOL_INCH * MM_PER_INCH
         if r is not None:
             radius = abs(r.value) * s.scale
             if d < 1e-9:
-                raise b.error(r, "R-form arc with end point equal to start: a full circle needs I/J")
+                raise b.error(r, f"R-form arc with end point equal to start: a full circle needs {offs[0]}/{offs[1]}")
             if radius == 0:
                 raise b.error(r, "arc radius R is zero")
             half = d / 2
-            if half > radius + ARC_RADIUS_TOL_MM:
+            if half > radius + tol:
                 raise b.error(r, f"arc radius {radius:g} mm is smaller than half the chord {half:g} mm")
             h = math.sqrt(max(radius * radius - half * half, 0.0))
             n_left = np.array([-chord[1], chord[0]]) / d  # left of the travel direction
@@ -395,18 +469,25 @@ class _Interpreter:
             c2 = (start[:2] + end[:2]) / 2 + side * h * n_left
         else:
             if i is None and j is None:
-                raise b.error(first, "arc needs I/J (centre offset) or R (radius)")
-            off = np.array([i.value if i else 0.0, j.value if j else 0.0]) * s.scale
-            c2 = start[:2] + off
+                raise b.error(first, f"arc needs {offs[0]}/{offs[1]} (centre) or R (radius)")
+            if s.arc_absolute:  # G90.1: I J K are the centre's coordinates
+                c2 = np.array(
+                    [
+                        i.value * s.scale + self.offset[perm[0]] if i else start[0],
+                        j.value * s.scale + self.offset[perm[1]] if j else start[1],
+                    ]
+                )
+            else:
+                c2 = start[:2] + np.array([i.value if i else 0.0, j.value if j else 0.0]) * s.scale
             r1 = float(np.hypot(*(start[:2] - c2)))
             r2 = float(np.hypot(*(end[:2] - c2)))
             if r1 < 1e-9:
                 raise b.error(i or j, "arc centre coincides with its start point (radius zero)")
-            if abs(r1 - r2) > ARC_RADIUS_TOL_MM:
+            if abs(r1 - r2) > tol:
                 raise b.error(
                     i or j,
                     f"radius to end {r2:.6g} mm differs from radius to start {r1:.6g} mm by "
-                    f"{abs(r1 - r2):.3g} mm (tolerance {ARC_RADIUS_TOL_MM} mm)",
+                    f"{abs(r1 - r2):.3g} mm (tolerance {tol:.4g} mm)",
                 )
             if d > 1e-9:
                 # Move the centre onto the chord's perpendicular bisector: the arc then passes
@@ -414,8 +495,9 @@ class _Interpreter:
                 mid = (start[:2] + end[:2]) / 2
                 n = np.array([-chord[1], chord[0]]) / d
                 c2 = mid + float(np.dot(c2 - mid, n)) * n
-        center = np.array([c2[0], c2[1], start[2]])
-        self.emit(Kind.ARC, b.line, end, center=center, turn=-1 if cw else 1, feed=self.feed_mm_s(b, first))
+        center = np.empty(3)
+        center[list(perm)] = [c2[0], c2[1], start[2]]
+        self.emit(Kind.ARC, b.line, end_prog, center=center, turn=-1 if cw else 1, feed=self.feed_mm_s(b, first))
 
     # -- splines -------------------------------------------------------------------------------
     def spline(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:

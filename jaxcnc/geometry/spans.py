@@ -133,9 +133,31 @@ def _line_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     )
 
 
+def _plane_perm(p: Program, rows: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` program axes (first, second, normal) of each row's arc plane (G17/G18/G19)."""
+    table = np.zeros((20, 3), np.int64)
+    for plane, axes in ((17, (0, 1, 2)), (18, (2, 0, 1)), (19, (1, 2, 0))):
+        table[plane] = axes
+    return table[p.plane[rows]]
+
+
+def _permute(a: np.ndarray, perm: np.ndarray) -> np.ndarray:
+    """Program coordinates → plane coordinates (first, second, normal)."""
+    return np.take_along_axis(a, perm, axis=1)
+
+
+def _unpermute(a: np.ndarray, perm: np.ndarray) -> np.ndarray:
+    """Plane coordinates → program coordinates."""
+    out = np.empty_like(a)
+    np.put_along_axis(out, perm, a, axis=1)
+    return out
+
+
 def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
-    """Split XY arcs into ≤ 90° pieces, each an exact rational quadratic."""
-    s, e, c, turn = p.start[rows], p.end[rows], p.center[rows], p.turn[rows].astype(np.float64)
+    """Split arcs into ≤ 90° pieces, each an exact rational quadratic (computed in plane coordinates)."""
+    perm_rows = _plane_perm(p, rows)
+    s, e, c = (_permute(a[rows], perm_rows) for a in (p.start, p.end, p.center))
+    turn = p.turn[rows].astype(np.float64)
     r = np.hypot(*(s - c)[:, :2].T)
     th_s = np.arctan2(*(s - c)[:, 1::-1].T)
     th_e = np.arctan2(*(e - c)[:, 1::-1].T)
@@ -179,7 +201,9 @@ def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
         ext = cc + rr[:, None] * np.array([dx, dy, 0.0])
         lo = np.where(inside[:, None], np.minimum(lo, ext), lo)
         hi = np.where(inside[:, None], np.maximum(hi, ext), hi)
-    coeffs, origin = _quadratic(p0, p1, p2, w1)
+    perm = perm_rows[idx]
+    back = [_unpermute(a, perm) for a in (p0, p1, p2, tangent(a0), tangent(a1), lo, hi)]
+    coeffs, origin = _quadratic(back[0], back[1], back[2], w1)
     return dict(
         coeffs=coeffs,
         origin=origin,
@@ -188,10 +212,10 @@ def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
         radius=rr,
         half_angle=phi / 2,
         kappa_max=1.0 / rr,
-        tangent_in=tangent(a0),
-        tangent_out=tangent(a1),
-        lo=lo,
-        hi=hi,
+        tangent_in=back[3],
+        tangent_out=back[4],
+        lo=back[5],
+        hi=back[6],
         block=rows[idx],
     )
 
@@ -252,7 +276,9 @@ def _helix_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndar
     and rise ``H`` is cut into ``n ≥ cbrt(0.0211 (Φ / 90°)² |H| / HELIX_TOL_MM)`` equal pieces
     (and at least one per 90°). The pieces are certified like spline pieces.
     """
-    s, e, c, turn = p.start[rows], p.end[rows], p.center[rows], p.turn[rows].astype(np.float64)
+    perm_rows = _plane_perm(p, rows)
+    s, e, c = (_permute(a[rows], perm_rows) for a in (p.start, p.end, p.center))
+    turn = p.turn[rows].astype(np.float64)
     r = np.hypot(*(s - c)[:, :2].T)
     th_s = np.arctan2(*(s - c)[:, 1::-1].T)
     th_e = np.arctan2(*(e - c)[:, 1::-1].T)
@@ -280,7 +306,8 @@ def _helix_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndar
     p0, p1, p2 = point(a0, z0), point(am, (z0 + z2) / 2, 1.0 / w1), point(a1, z2)
     p0[j == 0] = s[idx[j == 0]]  # the programmed points, bit for bit
     p2[j == n - 1] = e[idx[j == n - 1]]
-    coeffs, origin = _quadratic(p0, p1, p2, w1)
+    perm = perm_rows[idx]
+    coeffs, origin = _quadratic(_unpermute(p0, perm), _unpermute(p1, perm), _unpermute(p2, perm), w1)
     return _certified(elevate(coeffs, degree), origin, rows[idx])
 
 
@@ -342,7 +369,9 @@ def build_spans(program: Program) -> Spans:
     move_len = np.linalg.norm(program.end - program.start, axis=1)
     is_line = (kind == Kind.LINE) & (move_len > MIN_LENGTH_MM)
     parts = []
-    helical = (kind == Kind.ARC) & (np.abs(program.end[:, 2] - program.start[:, 2]) > MIN_LENGTH_MM)
+    normal = _plane_perm(program, np.arange(len(program)))[:, 2]
+    rise = np.take_along_axis(program.end - program.start, normal[:, None], axis=1)[:, 0]
+    helical = (kind == Kind.ARC) & (np.abs(rise) > MIN_LENGTH_MM)
     has_curves = bool(np.any(kind == Kind.CURVE)) or bool(helical.any())
     n_cheb = (CHEB_N + 1, CHEB_N) if has_curves else (0, 0)
     for build, mask in (

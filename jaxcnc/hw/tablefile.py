@@ -88,6 +88,7 @@ class EventKind:
     TOOL_CHANGE = 5  # M6: aux = tool number
     PROGRAM_END = 6  # M2/M30
     DWELL = 7  # a dwell starts: value = seconds
+    COOLANT = 8  # M7/M8/M9 (assist gas): aux = 7, 8 or 9
 
     NAMES = {
         1: "block",
@@ -97,6 +98,7 @@ class EventKind:
         5: "tool_change",
         6: "program_end",
         7: "dwell",
+        8: "coolant",
     }
 
 

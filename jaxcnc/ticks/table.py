@@ -25,6 +25,7 @@ _EVENT_OF = {
     Event.OPTIONAL_STOP: EventKind.OPTIONAL_STOP,
     Event.TOOL_CHANGE: EventKind.TOOL_CHANGE,
     Event.PROGRAM_END: EventKind.PROGRAM_END,
+    Event.COOLANT: EventKind.COOLANT,
 }
 
 
