@@ -25,7 +25,7 @@ def _fmt_axes(d: dict[str, float], unit: str) -> str:
     return ", ".join(f"{a}={v:.4g}" for a, v in d.items()) + f" {unit}"
 
 
-def _load_program(path: Path, machine):
+def _load_program(path: Path, machine, dialect: str | None = None):
     from jaxcnc.gcode import load_gcode
     from jaxcnc.planners import program_start
 
@@ -35,11 +35,16 @@ def _load_program(path: Path, machine):
     if suffix not in GCODE_SUFFIXES:
         raise JaxcncError(f"{path}: unknown input type {suffix!r}; G-code files end in {', '.join(GCODE_SUFFIXES)}")
     start = program_start(machine)
-    return load_gcode(path, start=start, home=start)
+    return load_gcode(path, start=start, home=start, dialect=dialect)
 
 
 def plan_file(
-    input_path: Path, machine_path: Path, out: Path, planner: str = "lookahead", progress: bool | None = None
+    input_path: Path,
+    machine_path: Path,
+    out: Path,
+    planner: str = "lookahead",
+    progress: bool | None = None,
+    dialect: str | None = None,
 ) -> dict:
     """Plan ``input_path`` on the machine and write the table; return the report dict."""
     from jaxcnc.hw.tablefile import TableFile
@@ -50,7 +55,7 @@ def plan_file(
 
     t0 = time.perf_counter()
     machine = load_machine(machine_path)
-    program = _load_program(input_path, machine)
+    program = _load_program(input_path, machine, dialect)
     t_parse = time.perf_counter()
     job = plan_job(program, machine, planner=planner)
     t_plan = time.perf_counter()
@@ -87,7 +92,12 @@ def plan_file(
 
 def cmd_plan(args: argparse.Namespace) -> int:
     report = plan_file(
-        Path(args.input), Path(args.machine), Path(args.output), args.planner, progress=False if args.quiet else None
+        Path(args.input),
+        Path(args.machine),
+        Path(args.output),
+        args.planner,
+        progress=False if args.quiet else None,
+        dialect=args.dialect,
     )
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
@@ -225,7 +235,9 @@ def cmd_expand(args: argparse.Namespace) -> int:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise SourceError(str(path), 0, 0, f"cannot read program: {exc}") from None
-    flat = expand_text(text, str(path), max_lines=args.max_lines)
+    from jaxcnc.gcode.dialect import load_dialect
+
+    flat = expand_text(text, str(path), max_lines=args.max_lines, dialect=load_dialect(args.dialect))
     if args.output:
         Path(args.output).write_text(flat)
     else:
@@ -263,6 +275,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--output", "-o", required=True, help="table file to write (e.g. job.ticks)")
     sp.add_argument("--report", "-r", help="write a JSON report (times, lengths, measured max v/a/j per axis)")
     sp.add_argument("--planner", default="lookahead", help="velocity planner (default: %(default)s)")
+    sp.add_argument(
+        "--dialect",
+        default="linuxcnc",
+        help="G-code dialect: linuxcnc, siemens, fanuc, or a dialect TOML file (default: %(default)s)",
+    )
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
     sp.set_defaults(func=cmd_plan)
 
@@ -321,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("program", help="G-code program")
     sp.add_argument("--output", "-o", help="write here instead of standard output")
     sp.add_argument("--max-lines", type=int, default=10_000_000, help="stop after this many executed lines")
+    sp.add_argument("--dialect", default="linuxcnc", help="linuxcnc, siemens, fanuc, or a dialect TOML file")
     sp.set_defaults(func=cmd_expand)
 
     sp = sub.add_parser(

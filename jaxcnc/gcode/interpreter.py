@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import SourceError
+from jaxcnc.gcode.dialect import LINUXCNC, Dialect, load_dialect
 from jaxcnc.gcode.lexer import Word, tokenize
 from jaxcnc.gcode.preprocess import MAX_DEPTH, MAX_LINES, expand
 from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
@@ -61,6 +62,7 @@ _G_GROUP = {
     52: 1,
     53: 1,
     62: 1,
+    10010: 1,
     180: 2,
     190: 2,
     901: 4,
@@ -89,7 +91,8 @@ _NOT_YET = {
 }
 _AXES = ("X", "Y", "Z")
 _ALLOWED = set("GMFSTNPQXYZIJKRLH")
-_SPLINE_CODES = (50, 51, 52, 62)
+_SPLINE_CODES = (50, 51, 52, 62, 10010)
+_SPLINE_NAMES = {50: "G5", 51: "G5.1", 52: "G5.2", 62: "G6.2", 10010: "BSPLINE"}
 _NEEDS_PREPROCESSOR = re.compile(r"[#\[\]]|^\s*/?\s*[oO]", re.MULTILINE)
 
 
@@ -142,7 +145,7 @@ class _State:
 class _Block:
     """The words of one block, grouped, with a record of which ones were used."""
 
-    def __init__(self, words: list[Word], file: str, line: int):
+    def __init__(self, words: list[Word], file: str, line: int, dialect: Dialect = LINUXCNC):
         self.file, self.line = file, line
         self.g: list[tuple[int, Word]] = []
         self.m: list[tuple[int, Word]] = []
@@ -151,7 +154,7 @@ class _Block:
         g_groups: dict[int, Word] = {}
         m_groups: dict[int, Word] = {}
         for w in words:
-            if w.letter not in _ALLOWED:
+            if w.letter not in _ALLOWED and w.letter not in dialect.addresses:
                 raise self.error(w, f"unsupported word {w.letter}{w.text}")
             if w.letter in "GM":
                 code = round(w.value * 10) if w.letter == "G" else round(w.value)
@@ -162,6 +165,8 @@ class _Block:
                     raise self.error(
                         w, f"{what} is not supported yet" if what else f"unknown or unsupported word {w.letter}{w.text}"
                     )
+                if w.letter == "G" and code in _SPLINE_NAMES and _SPLINE_NAMES[code] not in dialect.splines:
+                    raise self.error(w, f"{_SPLINE_NAMES[code]} is not part of the {dialect.name} dialect")
                 group = table[code]
                 if group in groups:
                     other = groups[group]
@@ -205,10 +210,11 @@ class _Block:
 
 
 class _Interpreter:
-    def __init__(self, file: str, start: np.ndarray, home: np.ndarray):
-        self.file = file
+    def __init__(self, file: str, start: np.ndarray, home: np.ndarray, dialect: Dialect = LINUXCNC):
+        self.file, self.dialect = file, dialect
+        self.address = {meaning: name for name, meaning in dialect.addresses.items()}
         self.home = np.asarray(home, dtype=np.float64)
-        self.s = _State(pos=np.asarray(start, dtype=np.float64).copy())
+        self.s = _State(pos=np.asarray(start, dtype=np.float64).copy(), arc_absolute=dialect.arc_centers_absolute)
         self.ended = False
 
     # -- rows -------------------------------------------------------------------------------
@@ -253,6 +259,12 @@ class _Interpreter:
     # -- one block --------------------------------------------------------------------------
     def block(self, b: _Block) -> None:
         s = self.s
+        if s.nurbs is not None and s.nurbs.kind == "BSPLINE":
+            continues = not b.m and all(code == 10010 for code, _ in b.g) and bool(b.axis_words())
+            if not continues or b.has_g(10010) is not None:
+                self.finish_nurbs(b)
+                if b.has_g(10010) is None and s.motion == 10010:
+                    s.motion = None
         # F, S, T
         if (w := b.take("F")) is not None:
             if w.value < 0:
@@ -359,7 +371,9 @@ class _Interpreter:
                 raise b.error(next(iter(axes.values())), "G5.3 takes no axis words")
             self.finish_nurbs(b)
             s.motion = None
-        elif s.motion in _SPLINE_CODES and (axes or motion_word is not None):
+        elif s.motion in _SPLINE_CODES and (
+            axes or motion_word is not None or (s.motion == 62 and s.nurbs is not None and "K" in b.vals)
+        ):
             self.spline(b, axes, motion_word)
         elif (g28 := b.has_g(280)) is not None:
             if motion_word is not None and axes:
@@ -502,11 +516,13 @@ class _Interpreter:
     # -- splines -------------------------------------------------------------------------------
     def spline(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
         s = self.s
-        first = motion_word or next(iter(axes.values()))
+        first = motion_word or next(iter(axes.values()), None) or b.vals["K"]
         if 2 in axes:
             raise b.error(axes[2], "spline blocks move X and Y only (Z is not allowed)")
         if s.motion in (50, 51):
             self.bezier(b, axes, first, cubic=s.motion == 50)
+        elif s.motion == 10010:
+            self.bspline(b, axes, motion_word, first)
         elif s.motion == 52:
             self.g52(b, axes, motion_word, first)
         else:
@@ -573,6 +589,34 @@ class _Interpreter:
         s.nurbs.weights.append(1.0 if p is None else p.value)
         s.pos = s.nurbs.points[-1].copy()  # incremental coordinates continue from the last point
 
+    def bspline(self, b: _Block, axes: dict[int, Word], motion_word: Word | None, first: Word) -> None:
+        """Siemens BSPLINE: one control point per block (see :mod:`jaxcnc.gcode.splines`)."""
+        s = self.s
+        pw, sd, pl = (
+            b.take(self.address[m]) if m in self.address else None for m in ("weight", "degree", "knot_interval")
+        )
+        if s.nurbs is None:
+            degree = 3 if sd is None else sd.value
+            if degree != int(degree) or not 1 <= degree <= 7:
+                raise b.error(sd, f"spline degree {sd.letter}={sd.text} must be an integer from 1 to 7")
+            s.nurbs = NurbsBlock("BSPLINE", b.line, first.column, int(degree) + 1, [s.pos.copy()], [1.0])
+            self._g62_start = s.pos.copy()
+        elif sd is not None:
+            raise b.error(sd, f"the degree {sd.letter}= is given on the first BSPLINE block only")
+        if not axes:
+            raise b.error(first, "BSPLINE block without a point")
+        if pw is not None and pw.value <= 0:
+            raise b.error(pw, f"point weight {pw.letter}={pw.text} must be positive")
+        if pl is not None and pl.value < 0:
+            raise b.error(pl, f"knot interval {pl.letter}={pl.text} must not be negative")
+        given = [v is not None for v in s.nurbs.knots]
+        if given and given[0] != (pl is not None):
+            raise b.error(pl or first, "give the knot interval on every BSPLINE block or on none")
+        s.nurbs.points.append(self.target(axes))
+        s.nurbs.weights.append(1.0 if pw is None else pw.value)
+        s.nurbs.knots.append(None if pl is None else pl.value)
+        s.pos = s.nurbs.points[-1].copy()
+
     def g62(self, b: _Block, axes: dict[int, Word], motion_word: Word | None, first: Word) -> None:
         s = self.s
         p, k, r, q = b.take("P"), b.take("K"), b.take("R"), b.take("Q")
@@ -614,7 +658,7 @@ class _Interpreter:
         s = self.s
         nb = s.nurbs
         s.nurbs = None
-        if nb.kind == "G5.2":
+        if nb.kind in ("G5.2", "BSPLINE"):
             s.pos = nb.points[0].copy()
         if len(nb.points) < nb.order:
             raise SourceError(
@@ -641,12 +685,15 @@ class _Interpreter:
             raise SourceError(self.file, line or b.line, column or (word.column if word else 0), msg) from None
         s = self.s
         s.curves.append(curve)
-        feed = self.feed_mm_s(b, word or next(iter(b.vals.values()), None))
+        feed = self.feed_mm_s(b, word) if b is not None else math.nan
         self.emit(Kind.CURVE, line or b.line, end, feed=feed, curve=len(s.curves) - 1)
 
-    def close(self) -> None:
-        """End of the program text: nothing may be left open."""
+    def close(self, b: _Block | None) -> None:
+        """End of the program text: a BSPLINE ends here; nothing else may be left open."""
         nb = self.s.nurbs
+        if nb is not None and nb.kind == "BSPLINE":
+            self.finish_nurbs(b)
+            return
         if nb is not None and not (nb.kind == "G6.2" and nb.complete):
             what = (
                 "is not closed with G5.3"
@@ -675,6 +722,7 @@ def parse_gcode(
     block_delete: bool = False,
     max_depth: int = MAX_DEPTH,
     max_lines: int = MAX_LINES,
+    dialect: str | Dialect | None = None,
 ) -> Program:
     """Interpret G-code ``text`` into a Program.
 
@@ -688,14 +736,18 @@ def parse_gcode(
         home: G28 home position (x, y, z) in mm; defaults to ``start``.
         block_delete: the block delete switch: when on, blocks starting with ``/`` are skipped.
         max_depth, max_lines: limits on subroutine nesting and executed lines.
+        dialect: ``"linuxcnc"`` (default), ``"siemens"``, ``"fanuc"``, a dialect TOML file or a
+            :class:`~jaxcnc.gcode.dialect.Dialect`.
 
     Raises:
         SourceError: naming ``file:line:column``, the word and the reason.
     """
+    dia = load_dialect(dialect)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
-    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr)
+    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia)
+    last = None
     if _NEEDS_PREPROCESSOR.search(text):
-        blocks = [(e.text, e.line) for e in expand(text, file, max_depth=max_depth, max_lines=max_lines)]
+        blocks = [(e.text, e.line) for e in expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia)]
     else:
         blocks = []
         percent_seen = False
@@ -712,13 +764,14 @@ def parse_gcode(
             if block_delete:
                 continue  # block delete switch on: the block is skipped
             raw = raw.replace("/", " ", 1)
-        words, _comments = tokenize(raw, file, line_no)
+        words, _comments = tokenize(raw, file, line_no, dia)
         if not words:
             continue
-        it.block(_Block(words, file, line_no))
+        last = _Block(words, file, line_no, dia)
+        it.block(last)
         if it.ended:
             break
-    it.close()
+    it.close(last)
     curves = make_curve_table(it.s.curves) if it.s.curves else None
     return program_from_columns(file=file, curves=curves, **it.program())
 

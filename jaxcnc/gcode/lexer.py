@@ -25,22 +25,31 @@ class Word:
     column: int
 
 
-def strip_comments(raw: str, file: str, line_no: int) -> tuple[str, list[int], list[str]]:
-    """Remove comments and blanks. Returns (compact text, source column of each char, comments)."""
+#: Internal G-code numbers of dialect keywords (tenths as the interpreter counts them).
+KEYWORD_CODES = {"BSPLINE": 1001.0}
+
+
+def strip_comments(
+    raw: str, file: str, line_no: int, paren: bool = True, semicolon: bool = True
+) -> tuple[str, list[int], list[str]]:
+    """Remove comments and blanks. Returns (compact text, source column of each char, comments).
+
+    ``paren`` / ``semicolon``: which comment styles the dialect has.
+    """
     chars: list[str] = []
     cols: list[int] = []
     comments: list[str] = []
     i, n = 0, len(raw)
     while i < n:
         c = raw[i]
-        if c == "(":
+        if c == "(" and paren:
             j = raw.find(")", i + 1)
             if j < 0:
                 raise SourceError(file, line_no, i + 1, "comment opened with '(' is never closed")
             comments.append(raw[i + 1 : j])
             i = j + 1
             continue
-        if c == ";":
+        if c == ";" and semicolon:
             comments.append(raw[i + 1 :])
             break
         if c in " \t\r\n\f\v":
@@ -52,12 +61,41 @@ def strip_comments(raw: str, file: str, line_no: int) -> tuple[str, list[int], l
     return "".join(chars), cols, comments
 
 
-def tokenize(raw: str, file: str, line_no: int) -> tuple[list[Word], list[str]]:
-    """Words and comments of one line; raises :class:`SourceError` on anything malformed."""
-    text, cols, comments = strip_comments(raw, file, line_no)
+def tokenize(raw: str, file: str, line_no: int, dialect=None) -> tuple[list[Word], list[str]]:
+    """Words and comments of one line; raises :class:`SourceError` on anything malformed.
+
+    ``dialect`` (a :class:`~jaxcnc.gcode.dialect.Dialect`) adds its comment styles, keywords
+    (``BSPLINE`` becomes an internal G word) and ``NAME=value`` addresses (words named ``NAME``).
+    """
+    paren = dialect.paren_comments if dialect is not None else True
+    semi = dialect.semicolon_comments if dialect is not None else True
+    text, cols, comments = strip_comments(raw, file, line_no, paren, semi)
+    keywords = dialect.keywords if dialect is not None else {}
+    addresses = dialect.addresses if dialect is not None else {}
     words: list[Word] = []
     i, n = 0, len(text)
+    upper = text.upper()
     while i < n:
+        matched = False
+        for name, meaning in keywords.items():
+            if upper.startswith(name, i):
+                words.append(Word("G", KEYWORD_CODES[meaning], name, cols[i]))
+                i += len(name)
+                matched = True
+                break
+        if matched:
+            continue
+        for name in addresses:
+            if upper.startswith(name + "=", i):
+                m = _NUMBER.match(text, i + len(name) + 1)
+                if m is None:
+                    raise SourceError(file, line_no, cols[i], f"{name}= needs a number")
+                words.append(Word(name, float(m.group(0)), m.group(0), cols[i]))
+                i = m.end()
+                matched = True
+                break
+        if matched:
+            continue
         c = text[i]
         col = cols[i]
         if not c.isascii() or not c.isalpha():
@@ -77,6 +115,17 @@ def tokenize(raw: str, file: str, line_no: int) -> tuple[list[Word], list[str]]:
         m = _NUMBER.match(text, i + 1)
         if m is None and i + 1 < n and text[i + 1] in "#[":
             raise SourceError(file, line_no, cols[i + 1], f"unexpected {text[i + 1]!r} after {c.upper()!r}")
+        if m is None and i + 1 < n and text[i + 1].isalpha():
+            j = col - 1  # the word as written (spaces end it there)
+            while j < len(raw) and raw[j].isalpha():
+                j += 1
+            dialect_name = dialect.name if dialect is not None else "linuxcnc"
+            raise SourceError(
+                file,
+                line_no,
+                col,
+                f"unknown word {raw[col - 1 : j].upper()!r} (not part of the {dialect_name} dialect)",
+            )
         if m is None:
             rest = text[i + 1 : i + 9]
             raise SourceError(

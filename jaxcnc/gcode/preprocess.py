@@ -45,7 +45,7 @@ _KEYWORDS = (
     "break",
     "continue",
 )
-_PLAIN = re.compile(r"[#\[\]oO]")
+_PLAIN = re.compile(r"[#\[\]]")
 
 
 @dataclass(frozen=True)
@@ -80,8 +80,9 @@ class _Frame:
 
 
 class Preprocessor:
-    def __init__(self, text: str, file: str, max_depth: int = MAX_DEPTH, max_lines: int = MAX_LINES):
+    def __init__(self, text: str, file: str, max_depth: int = MAX_DEPTH, max_lines: int = MAX_LINES, dialect=None):
         self.file, self.max_depth, self.max_lines = file, max_depth, max_lines
+        self.comment_styles = (dialect.paren_comments, dialect.semicolon_comments) if dialect else (True, True)
         self.lines = text.splitlines()
         self.globals: dict[object, float] = {}
         self.compact: dict[int, tuple[str, list[int]]] = {}
@@ -103,7 +104,7 @@ class Preprocessor:
             body = raw.lstrip()
             if body[:1] not in ("o", "O", "/"):
                 continue
-            text, cols, _ = strip_comments(raw, self.file, i + 1)
+            text, cols, _ = strip_comments(raw, self.file, i + 1, *self.comment_styles)
             if text.startswith("/"):
                 text, cols = text[1:], cols[1:]
             m = _OWORD.match(text)
@@ -194,7 +195,7 @@ class Preprocessor:
     # -- blocks ----------------------------------------------------------------------------
     def flatten(self, frame: _Frame, i: int, raw: str) -> str | None:
         """A block with parameters/expressions evaluated; assignments applied. None if empty."""
-        text, cols, _ = strip_comments(raw, self.file, i + 1)
+        text, cols, _ = strip_comments(raw, self.file, i + 1, *self.comment_styles)
         out: list[str] = []
         assigns: list[tuple[object, float]] = []
         pos = 0
@@ -242,6 +243,13 @@ class Preprocessor:
             self.write(frame, key, value)
         return " ".join(out) if out else None
 
+    def has_expressions(self, i: int, raw: str) -> bool:
+        """The block holds parameters or expressions (outside its comments)."""
+        if _PLAIN.search(raw) is None:
+            return False
+        compact = strip_comments(raw, self.file, i + 1, *self.comment_styles)[0]
+        return any(c in compact for c in "#[]")
+
     def run(self) -> list[ExpandedLine]:
         out: list[ExpandedLine] = []
         self.main = _Frame(ret=-1)
@@ -264,7 +272,7 @@ class Preprocessor:
                 continue
             ol = self.olines.get(i)
             if ol is None:
-                if _PLAIN.search(raw) is None:
+                if not self.has_expressions(i, raw):
                     if raw.strip():
                         out.append(ExpandedLine(raw.strip(), i + 1))
                 else:
@@ -370,10 +378,10 @@ class Preprocessor:
 
 
 def expand(
-    text: str, file: str = "<string>", *, max_depth: int = MAX_DEPTH, max_lines: int = MAX_LINES
+    text: str, file: str = "<string>", *, max_depth: int = MAX_DEPTH, max_lines: int = MAX_LINES, dialect=None
 ) -> list[ExpandedLine]:
-    """Flatten a parametric program; see the module docstring."""
-    return Preprocessor(text, file, max_depth, max_lines).run()
+    """Flatten a parametric program; see the module docstring. ``dialect`` sets the comment styles."""
+    return Preprocessor(text, file, max_depth, max_lines, dialect).run()
 
 
 def expand_text(text: str, file: str = "<string>", **kwargs) -> str:

@@ -8,6 +8,10 @@
   (``G5.2 P`` alone sets its weight), each block adds a control point with weight ``P`` (default 1);
   ``L`` is the order (default 3); the knots are LinuxCNC's clamped uniform integers
   ``0…0, 1, 2, …, n-k, n-k+1…n-k+1``.
+* ``BSPLINE X Y PW= SD= PL=`` (Siemens) — the programmed points are control points after the
+  current one, ``PW`` their weights, ``SD`` the degree (default 3), the running sums of ``PL`` the
+  knots (chord lengths without PL), clamped at both ends; the spline ends with the next motion
+  word or the end of the program.
 * ``G6.2 X Y R K P Q1`` … ``G6.2 K`` — a NURBS with explicit knots: ``P`` the order, each block a
   control point ``X Y`` with weight ``R`` and knot ``K``; blocks with only ``K`` add the trailing
   knots; the curve is complete when it has (control points + order) knots. ``Q1`` (as the
@@ -42,7 +46,7 @@ def g5_knots(n_points: int, order: int) -> np.ndarray:
 class NurbsBlock:
     """A NURBS being read block by block (G5.2 or G6.2)."""
 
-    kind: str  # "G5.2" or "G6.2"
+    kind: str  # "G5.2", "G6.2" or "BSPLINE"
     line: int
     column: int
     order: int
@@ -60,5 +64,27 @@ class NurbsBlock:
     def curve(self) -> Curve:
         pts = np.asarray(self.points, dtype=np.float64)
         w = np.asarray(self.weights, dtype=np.float64)
-        knots = g5_knots(len(pts), self.order) if self.kind == "G5.2" else np.asarray(self.knots, dtype=np.float64)
+        if self.kind == "G5.2":
+            knots = g5_knots(len(pts), self.order)
+        elif self.kind == "BSPLINE":
+            knots = bspline_knots(pts, self.knots, self.order - 1)
+        else:
+            knots = np.asarray(self.knots, dtype=np.float64)
         return self.order - 1, pts, w, knots
+
+
+def bspline_knots(points: np.ndarray, intervals: list[float | None], degree: int) -> np.ndarray:
+    """Siemens BSPLINE knots: running sums of the blocks' ``PL`` intervals, clamped at both ends.
+
+    ``intervals[k]`` is block k's PL (the block that programs control point k+1). Without PL the
+    intervals are the chord lengths between consecutive control points. The first
+    ``n - degree - 1`` running sums are the interior knots; the last knot is their total.
+    """
+    n = points.shape[0]
+    if all(v is None for v in intervals):
+        steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    else:
+        steps = np.asarray(intervals, dtype=np.float64)
+    sums = np.cumsum(steps)
+    total = sums[-1] if sums.size else 0.0
+    return np.concatenate([np.zeros(degree + 1), sums[: n - degree - 1], np.full(degree + 1, total)])

@@ -1,0 +1,97 @@
+"""Dialects: Siemens BSPLINE (the documents' example), Fanuc G06.2, user dialect files, errors."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxcnc.errors import JaxcncError, SourceError
+from jaxcnc.gcode import parse_gcode
+from jaxcnc.gcode.dialect import load_dialect, parse_dialect
+from jaxcnc.geometry import SpanKind, build_spans
+from jaxcnc.geometry.evaluate import evaluate
+
+SEEDS_BSPLINE = """\
+G00 X30 Y0 Z0
+BSPLINE X30 Y30 PW={w} SD=2 PL=0.25
+X0 Y30 PW=1 PL=0.0
+X-30 Y30 PW={w} PL=0.25
+X-30 Y0 PW=1 PL=0.0
+X-30 Y-30 PW={w} PL=0.25
+X0 Y-30 PW=1 PL=0.0
+X30 Y-30 PW={w} PL=0.25
+X30 Y0 PW=1 PL=0.0
+G00 X0 Y0
+M02
+"""
+
+
+@pytest.mark.parametrize(("w", "tol"), [("0.707", 1e-3), ("0.70710678118654757", 1e-9)])
+def test_documents_bspline_circle(w, tol):
+    """SEEDS §2: a degree-2 rational B-spline on a square of control points is the radius-30 circle."""
+    p = parse_gcode(SEEDS_BSPLINE.format(w=w), "circle.mpf", dialect="siemens")
+    deg, pts, weights, knots = p.curves.curve(0)
+    assert deg == 2
+    np.testing.assert_allclose(knots, [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1])
+    np.testing.assert_allclose(weights[1::2], float(w))
+    sp = build_spans(p)
+    c = np.flatnonzero(sp.kind == SpanKind.CURVE)
+    idx = np.repeat(c, 500)
+    u = np.tile(np.linspace(0, 1, 500), c.size)
+    (pos,) = evaluate(jnp.asarray(sp.coeffs[idx]), jnp.asarray(sp.origin[idx]), jnp.asarray(u))
+    r = np.hypot(*np.asarray(pos)[:, :2].T)
+    assert np.max(np.abs(r - 30)) <= tol  # within 1 µm with PW=0.707; 1e-9 mm with the exact weight
+    assert p.kind[-1] == 4 and p.end[-2, 0] == 0  # the spline ends at G00; the program at M02
+
+
+def test_bspline_without_pl_uses_chord_lengths():
+    p = parse_gcode("G0 X0 Y0\nBSPLINE X10 Y0 SD=2\nX10 Y10\nX20 Y10\nG1 X30 F600\n", "c.mpf", dialect="siemens")
+    _, _, _, knots = p.curves.curve(0)
+    np.testing.assert_allclose(knots, [0, 0, 0, 10, 30, 30, 30])
+
+
+def test_fanuc_nurbs_and_dialect_limits():
+    text = "G01 X0 Y0 F600\nG06.2 P3 K0 X0 Y0 R1\nK0 X10 Y10 R1\nK0 X20 Y0 R1\nK1 X30 Y10\nK2\nK2\nK2\nG01 X40\n"
+    p = parse_gcode(text, "f.nc", dialect="fanuc")
+    deg, _, _, knots = p.curves.curve(0)
+    assert deg == 2 and list(knots) == [0, 0, 0, 1, 2, 2, 2]
+    with pytest.raises(SourceError, match="G5 is not part of the fanuc dialect"):
+        parse_gcode("G5 X1 Y1 I1 J0 P0 Q1 F60\n", "f.nc", dialect="fanuc")
+    with pytest.raises(SourceError, match=r"unknown word 'BSPLINE' \(not part of the linuxcnc dialect\)"):
+        parse_gcode("BSPLINE X1 Y1\n", "l.ngc")  # not a LinuxCNC word
+    # Fanuc has no ';' comments; Siemens no '(' comments
+    with pytest.raises(SourceError):
+        parse_gcode("G01 X1 F60 ; note\n", "f.nc", dialect="fanuc")
+    with pytest.raises(SourceError):
+        parse_gcode("G01 X1 F60 (note)\n", "s.mpf", dialect="siemens")
+
+
+def test_user_dialect_file(tmp_path):
+    f = tmp_path / "mine.toml"
+    f.write_text('[dialect]\nname = "mine"\ncomments = ["paren"]\narc_centers = "absolute"\nsplines = []\n')
+    d = load_dialect(str(f))
+    assert d.name == "mine" and d.arc_centers_absolute and not d.semicolon_comments
+    p = parse_gcode("G0 X10 Y0\nG3 X0 Y10 I0 J0 F600\n", "m.ngc", dialect=d)
+    np.testing.assert_allclose(p.center[1], [0, 0, 0], atol=1e-12)  # I J absolute by default here
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("[dialect]\ncomments = ['hash']\n", "comments"),
+        ("[dialect]\nsplines = ['G7']\n", "splines"),
+        ("[dialect]\nfoo = 1\n", "unknown key"),
+        ("[keywords]\nBSPLINE = 'nothing'\n", "meanings"),
+        ("[addresses]\nP = 'weight'\n", "two letters"),
+        ("[dialect\n", "not valid TOML"),
+    ],
+)
+def test_bad_dialect_files(text, needle):
+    with pytest.raises(JaxcncError, match=needle):
+        parse_dialect(text, "bad.toml")
+
+
+def test_unknown_dialect_name():
+    with pytest.raises(JaxcncError, match="unknown dialect"):
+        load_dialect("heidenhain")
