@@ -103,6 +103,22 @@ def _best(fn: Callable[[], object], repeats: int) -> float:
     return best
 
 
+def tick_rate(job, n_chunks: int, repeats: int) -> tuple[float, float]:
+    """Steady ticks/s of sampling and quantising up to ``n_chunks`` chunks of ``job``, and the compile time."""
+    sampler = TickSampler(job)
+    n_ticks = min(sampler.n_rows, n_chunks * sampler.chunk)
+
+    def sample_all() -> None:
+        for first in range(0, n_ticks, sampler.chunk):
+            p, _ = sampler.program_positions(first, min(sampler.chunk, n_ticks - first))
+            quantize(p, job.machine.discrete_mm)
+
+    t0 = time.perf_counter()
+    sampler.program_positions(0, sampler.chunk)
+    compile_s = time.perf_counter() - t0
+    return n_ticks / _best(sample_all, repeats), compile_s
+
+
 def run_benchmarks(n_blocks: int = 100_000, repeats: int = 5, machine: MachineConfig | None = None) -> dict:
     """Run and print the benchmarks; return the figures as a dict."""
     m = machine or parse_machine(BENCH_MACHINE, "<bench>")
@@ -150,19 +166,7 @@ def run_benchmarks(n_blocks: int = 100_000, repeats: int = 5, machine: MachineCo
         f"  (jaxcnc {t_py / t_jax:.1f}x); max |diff| {err:.2e} (mm/s)^2"
     )
 
-    sampler = TickSampler(job)
-    n_ticks = min(sampler.n_rows, 20 * sampler.chunk)
-
-    def sample_all() -> None:
-        for first in range(0, n_ticks, sampler.chunk):
-            p, _ = sampler.program_positions(first, min(sampler.chunk, n_ticks - first))
-            quantize(p, m.discrete_mm)
-
-    t0 = time.perf_counter()
-    sampler.program_positions(0, sampler.chunk)
-    sample_compile = time.perf_counter() - t0
-    t_ticks = _best(sample_all, max(1, repeats // 2))
-    rate = n_ticks / t_ticks
+    rate, sample_compile = tick_rate(job, 20, max(1, repeats // 2))
     print(
         f"  tick sampling t -> s -> u -> position -> integers: first chunk {sample_compile:.2f} s incl. compile; "
         f"steady {rate:,.0f} ticks/s = {rate / 1e4:,.0f}x the documents' 10 kHz real-time rate"
@@ -273,19 +277,7 @@ def bench_curve(name: str, curve: tuple, n_eval: int = 1_000_000, repeats: int =
     t0 = time.perf_counter()
     job = plan_job(prog, m)
     plan_first = time.perf_counter() - t0
-    sampler = TickSampler(job)
-    n_ticks = min(sampler.n_rows, 30 * sampler.chunk)
-
-    def sample_all() -> None:
-        for first in range(0, n_ticks, sampler.chunk):
-            p_, _ = sampler.program_positions(first, min(sampler.chunk, n_ticks - first))
-            quantize(p_, m.discrete_mm)
-
-    t0 = time.perf_counter()
-    sampler.program_positions(0, sampler.chunk)
-    tick_compile = time.perf_counter() - t0
-    t_ticks = _best(sample_all, repeats)
-    rate = n_ticks / t_ticks
+    rate, tick_compile = tick_rate(job, 30, repeats)
     print(
         f"    plan (incl. span certification and compile) {plan_first:.2f} s; tick generation t -> s -> u(s) -> "
         f"position -> integers: {rate:,.0f} ticks/s = {rate / 1e4:,.0f}x the documents' 10 kHz "

@@ -245,3 +245,7 @@ def program_from_columns(file: str = "<memory>", curves: CurveTable | None = Non
         a.setflags(write=False)
         out[f.name] = a
     return Program(file=file, curves=curves, **out)
+
+
+#: The per-row columns of a :class:`Program`, in field order.
+PROGRAM_COLUMNS = tuple(f.name for f in fields(Program) if f.name not in ("file", "curves"))

@@ -27,7 +27,15 @@ from jaxcnc.gcode.dialect import LINUXCNC, Dialect, load_dialect
 from jaxcnc.gcode.lexer import Word, tokenize
 from jaxcnc.gcode.preprocess import MAX_DEPTH, MAX_LINES, expand
 from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
-from jaxcnc.program import Event, Kind, LaserMode, Program, make_curve_table, program_from_columns
+from jaxcnc.program import (
+    PROGRAM_COLUMNS,
+    Event,
+    Kind,
+    LaserMode,
+    Program,
+    make_curve_table,
+    program_from_columns,
+)
 
 MM_PER_INCH = 25.4
 #: Largest allowed difference between the start and end radius of an I/J/K arc, LinuxCNC's values
@@ -116,30 +124,7 @@ class _State:
     g5_last_pq: np.ndarray | None = None  # P, Q of the previous G5 (for tangent continuation)
     nurbs: NurbsBlock | None = None  # a G5.2 / G6.2 curve being read
     curves: list = field(default_factory=list)
-    rows: dict[str, list] = field(
-        default_factory=lambda: {
-            k: []
-            for k in (
-                "kind",
-                "start",
-                "end",
-                "center",
-                "turn",
-                "feed",
-                "rapid",
-                "laser",
-                "power",
-                "dwell_s",
-                "stop_before",
-                "blend_tol",
-                "event",
-                "event_value",
-                "line",
-                "curve",
-                "plane",
-            )
-        }
-    )
+    rows: dict[str, list] = field(default_factory=lambda: {k: [] for k in PROGRAM_COLUMNS})
 
 
 class _Block:

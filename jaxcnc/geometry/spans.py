@@ -153,17 +153,25 @@ def _unpermute(a: np.ndarray, perm: np.ndarray) -> np.ndarray:
     return out
 
 
-def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
-    """Split arcs into ≤ 90° pieces, each an exact rational quadratic (computed in plane coordinates)."""
-    perm_rows = _plane_perm(p, rows)
-    s, e, c = (_permute(a[rows], perm_rows) for a in (p.start, p.end, p.center))
+def _arc_frame(p: Program, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Arc rows in plane coordinates: ``(perm, start, end, centre, turn, radius, start angle, sweep)``.
+
+    The sweep is in ``(0, 2π]`` in the row's direction; an end equal to the start is a full circle.
+    """
+    perm = _plane_perm(p, rows)
+    s, e, c = (_permute(a[rows], perm) for a in (p.start, p.end, p.center))
     turn = p.turn[rows].astype(np.float64)
     r = np.hypot(*(s - c)[:, :2].T)
     th_s = np.arctan2(*(s - c)[:, 1::-1].T)
     th_e = np.arctan2(*(e - c)[:, 1::-1].T)
     sweep = np.mod(turn * (th_e - th_s), 2 * np.pi)  # in [0, 2π)
-    full = np.hypot(*(e - s)[:, :2].T) < MIN_LENGTH_MM
-    sweep = np.where(full, 2 * np.pi, sweep)
+    sweep = np.where(np.hypot(*(e - s)[:, :2].T) < MIN_LENGTH_MM, 2 * np.pi, sweep)
+    return perm, s, e, c, turn, r, th_s, sweep
+
+
+def _arc_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """Split arcs into ≤ 90° pieces, each an exact rational quadratic (computed in plane coordinates)."""
+    perm_rows, s, e, c, turn, r, th_s, sweep = _arc_frame(p, rows)
     n_pieces = np.maximum(1, np.ceil(sweep / (np.pi / 2) - 1e-12)).astype(np.int64)
     idx = np.repeat(np.arange(len(rows)), n_pieces)
     j = np.arange(idx.size) - np.repeat(np.cumsum(n_pieces) - n_pieces, n_pieces)  # piece number
@@ -276,14 +284,7 @@ def _helix_spans(p: Program, rows: np.ndarray, degree: int) -> dict[str, np.ndar
     and rise ``H`` is cut into ``n ≥ cbrt(0.0211 (Φ / 90°)² |H| / HELIX_TOL_MM)`` equal pieces
     (and at least one per 90°). The pieces are certified like spline pieces.
     """
-    perm_rows = _plane_perm(p, rows)
-    s, e, c = (_permute(a[rows], perm_rows) for a in (p.start, p.end, p.center))
-    turn = p.turn[rows].astype(np.float64)
-    r = np.hypot(*(s - c)[:, :2].T)
-    th_s = np.arctan2(*(s - c)[:, 1::-1].T)
-    th_e = np.arctan2(*(e - c)[:, 1::-1].T)
-    sweep = np.mod(turn * (th_e - th_s), 2 * np.pi)
-    sweep = np.where(np.hypot(*(e - s)[:, :2].T) < MIN_LENGTH_MM, 2 * np.pi, sweep)
+    perm_rows, s, e, c, turn, r, th_s, sweep = _arc_frame(p, rows)
     rise = e[:, 2] - s[:, 2]
     quarters = np.ceil(sweep / (np.pi / 2) - 1e-12)
     by_tol = np.ceil(np.cbrt(HELIX_Z_ERR * (sweep / (np.pi / 2)) ** 2 * np.abs(rise) / HELIX_TOL_MM))

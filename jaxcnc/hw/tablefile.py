@@ -59,19 +59,8 @@ _FIELDS = (
     "data_offset",
     "events_offset",
 )
-_HEADER_KEYS = (
-    "n_axes",
-    "block_rows",
-    "flags",
-    "tick_hz",
-    "discrete_mm",
-    "n_rows",
-    "n_blocks",
-    "n_events",
-    "events_crc",
-    "data_offset",
-    "events_offset",
-)
+# the TableHeader fields that come from the fixed header (json_bytes only sizes the metadata)
+_HEADER_KEYS = tuple(f for f in _FIELDS if f not in ("magic", "version", "json_bytes"))
 assert _HEADER.size <= 124
 
 #: Event record: tick (int64), kind (uint32), aux (uint32: line, tool, laser mode), value (float64).
