@@ -114,3 +114,17 @@ def test_verify_requires_rest_at_both_ends(tmp_path):
     meas = measure_table(TableFile(tmp_path / "m.ticks"), make_machine(tick_hz=1000))
     bad = {(v.first_tick, v.quantity) for v in meas.violations if v.axis == "x"}
     assert (1, "a") in bad and (n - 1, "a") in bad  # starting and stopping with a jump
+
+
+def test_jobs_are_plain_picklable_data(planned, tmp_path):
+    """Program, machine, spans and plan pickle (one job per process scales out unchanged)."""
+    import pickle
+
+    from jaxcnc.ticks.table import write_table
+
+    job, table, _ = planned
+    clone = pickle.loads(pickle.dumps(job))
+    path = write_table(clone, tmp_path / "clone.ticks", progress=False)
+    from jaxcnc.hw.tablefile import TableFile
+
+    np.testing.assert_array_equal(TableFile(path).positions, table.positions)

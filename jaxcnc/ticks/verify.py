@@ -71,7 +71,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1, strict=False))
 
 
-def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 20) -> Measurement:
+def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 18) -> Measurement:
     """Measure a table's per-axis |v|, |a|, |j| and travel; check them against ``machine``.
 
     Differences at row ``k`` use rows ``k-3..k`` (jerk), ``k-2..k`` (acceleration) and
