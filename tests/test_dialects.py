@@ -95,3 +95,9 @@ def test_bad_dialect_files(text, needle):
 def test_unknown_dialect_name():
     with pytest.raises(JaxcncError, match="unknown dialect"):
         load_dialect("heidenhain")
+
+
+def test_fanuc_nurbs_cancelled_before_its_knots_are_complete():
+    with pytest.raises(SourceError) as info:
+        parse_gcode("G01 X0 Y0 F600\nG06.2 P3 K0 X0 Y0\nK0 X10 Y10\nK0 X20 Y0\nK1\nG01 X40\n", "f.nc", dialect="fanuc")
+    assert info.value.line == 6 and "opened at line 2 is incomplete: 4 knots, 6 needed" in info.value.reason

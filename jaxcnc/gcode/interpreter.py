@@ -201,6 +201,7 @@ class _Interpreter:
         self.home = np.asarray(home, dtype=np.float64)
         self.s = _State(pos=np.asarray(start, dtype=np.float64).copy(), arc_absolute=dialect.arc_centers_absolute)
         self.ended = False
+        self.machine_coords = False  # G53 in the current block
 
     # -- rows -------------------------------------------------------------------------------
     def emit(
@@ -326,6 +327,13 @@ class _Interpreter:
             if (w := b.has_g(code)) is not None:
                 if s.nurbs is not None and s.nurbs.kind == "G5.2" and code != 52:
                     raise b.error(w, f"G5.2 NURBS opened at line {s.nurbs.line} is not closed with G5.3")
+                if s.nurbs is not None and s.nurbs.kind == "G6.2" and not s.nurbs.complete and code != 62:
+                    nb = s.nurbs
+                    raise b.error(
+                        w,
+                        f"G6.2 NURBS opened at line {nb.line} is incomplete: {len(nb.knots)} knots, "
+                        f"{len(nb.points) + nb.order} needed",
+                    )
                 s.motion, motion_word = code, w
         axes = b.axis_words()
         for letter in _AXES:
@@ -393,7 +401,7 @@ class _Interpreter:
         s = self.s
         t = s.pos.copy()
         for i, w in axes.items():
-            if getattr(self, "machine_coords", False):  # G53: machine coordinates, absolute
+            if self.machine_coords:  # G53: machine coordinates, absolute
                 t[i] = w.value * s.scale
             elif s.absolute:
                 t[i] = w.value * s.scale + self.offset[i]
@@ -585,7 +593,6 @@ class _Interpreter:
             if degree != int(degree) or not 1 <= degree <= 7:
                 raise b.error(sd, f"spline degree {sd.letter}={sd.text} must be an integer from 1 to 7")
             s.nurbs = NurbsBlock("BSPLINE", b.line, first.column, int(degree) + 1, [s.pos.copy()], [1.0])
-            self._g62_start = s.pos.copy()
         elif sd is not None:
             raise b.error(sd, f"the degree {sd.letter}= is given on the first BSPLINE block only")
         if not axes:
@@ -612,8 +619,7 @@ class _Interpreter:
                 raise b.error(p, f"NURBS order P{p.text} must be an integer from 2 to 8")
             if q is not None and q.value != 1:
                 raise b.error(q, f"G6.2 Q{q.text} is not supported (only Q1)")
-            s.nurbs = NurbsBlock("G6.2", b.line, first.column, int(p.value))
-            self._g62_start = s.pos.copy()
+            s.nurbs = NurbsBlock("G6.2", b.line, first.column, int(p.value), start=s.pos.copy())
         elif p is not None or q is not None:
             raise b.error(p or q, "P and Q are given on the first G6.2 block only")
         if k is None:
@@ -628,7 +634,7 @@ class _Interpreter:
                 raise b.error(r, f"NURBS weight R{r.text} must be positive")
             s.nurbs.points.append(self.target(axes))
             s.nurbs.weights.append(1.0 if r is None else r.value)
-            if len(s.nurbs.points) == 1 and np.linalg.norm(s.nurbs.points[0] - self._g62_start) > 1e-6:
+            if len(s.nurbs.points) == 1 and np.linalg.norm(s.nurbs.points[0] - s.nurbs.start) > 1e-6:
                 raise b.error(
                     first, "a G6.2 NURBS starts at its first control point: program it at the current position"
                 )
@@ -636,7 +642,7 @@ class _Interpreter:
         elif r is not None:
             raise b.error(r, "weight R without a control point")
         if s.nurbs.complete:
-            s.pos = self._g62_start
+            s.pos = s.nurbs.start
             self.finish_nurbs(b)
 
     def finish_nurbs(self, b: _Block) -> None:

@@ -53,6 +53,7 @@ class NurbsBlock:
     points: list[np.ndarray] = field(default_factory=list)
     weights: list[float] = field(default_factory=list)
     knots: list[float] = field(default_factory=list)
+    start: np.ndarray | None = None  # where the machine stood when the curve began (G6.2)
 
     @property
     def complete(self) -> bool:
