@@ -168,7 +168,11 @@ def cmd_play(args: argparse.Namespace) -> int:
         bar.update(done - last[0])
         last[0] = done
 
-    result = play(table, sink, progress=progress)
+    try:
+        result = play(table, sink, progress=progress)
+    except ConnectionError as exc:
+        bar.close()
+        raise JaxcncError(f"{args.sink}: {exc}") from None
     bar.close()
     if not args.quiet:
         print(
@@ -302,7 +306,12 @@ def build_parser() -> argparse.ArgumentParser:
         "verified before anything moves.",
     )
     sp.add_argument("table", help="table file")
-    sp.add_argument("--sink", default="sim", help="where to play: sim (in-process virtual drives)")
+    sp.add_argument(
+        "--sink",
+        default="sim",
+        help="where to play: sim (in-process virtual drives), tcp://HOST:PORT or "
+        "udp://HOST:PORT (the stream protocol; see python -m jaxcnc.hw.receiver)",
+    )
     sp.add_argument("--record", help="sim: save the executed drive positions to this .npy file")
     sp.add_argument("--realtime", action="store_true", help="sim: run the virtual clock in wall-clock time")
     sp.add_argument("--quiet", "-q", action="store_true")

@@ -8,10 +8,17 @@ from jaxcnc.hw.sinks.sim import SimSink
 
 
 def open_sink(spec: str, **options) -> Sink:
-    """The sink named by ``spec`` (``sim``); options go to its constructor."""
+    """The sink named by ``spec`` (``sim``, ``tcp://HOST:PORT``, ``udp://HOST:PORT``)."""
     if spec == "sim":
         return SimSink(**options)
-    raise JaxcncError(f"unknown or not yet supported sink {spec!r}; available: sim")
+    if spec.startswith(("tcp://", "udp://")):
+        from jaxcnc.hw.sinks.stream import StreamSink
+
+        try:
+            return StreamSink(spec, **options)
+        except ValueError as exc:
+            raise JaxcncError(str(exc)) from None
+    raise JaxcncError(f"unknown or not yet supported sink {spec!r}; available: sim, tcp://HOST:PORT, udp://HOST:PORT")
 
 
 __all__ = ["SimSink", "Sink", "open_sink"]

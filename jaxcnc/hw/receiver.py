@@ -1,0 +1,209 @@
+"""The reference receiver of the stream protocol: a controller's buffer and clock, in its own process.
+
+    python -m jaxcnc.hw.receiver tcp://127.0.0.1:0 --record executed.npy [--capacity 8192] [--speed 20]
+
+It prints ``listening tcp://HOST:PORT`` once bound, takes frames as :mod:`jaxcnc.hw.stream` defines,
+executes rows at the table's tick rate (``--speed`` times faster for tests), records each executed
+row at its tick, and when the job is done prints one JSON line of statistics and exits. Every tick
+is executed exactly once and in order: a row is taken only when it is the next one needed.
+
+Clock: execution starts when the buffer is half full (double buffering) or the job's last row has
+arrived. If the buffer runs dry before the end (an underrun: a slow player or a lost link), the
+drives hold the last position and the clock waits until the buffer is half full again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import select
+import socket
+import sys
+import time
+from collections import deque
+
+import numpy as np
+
+from jaxcnc.hw.stream import (
+    ACK,
+    DATA,
+    DONE,
+    END,
+    HELLO,
+    WELCOME,
+    Frame,
+    FramedTCP,
+    ProtocolError,
+    decode,
+    parse_address,
+)
+
+
+class Receiver:
+    def __init__(self, capacity: int = 8192, speed: float = 1.0, record: str | None = None):
+        self.capacity, self.speed, self.record_path = capacity, speed, record
+        self.next_tick = 0
+        self.executed = -1
+        self.buffer: deque[np.ndarray] = deque()
+        self.queued = 0
+        self.n_rows: int | None = None
+        self.n_axes = 0
+        self.tick_hz = 1.0
+        self.ended = False
+        self.running = False
+        self.t0 = 0.0
+        self.tick0 = 0
+        self.stats = {"frames": 0, "duplicates": 0, "gaps": 0, "bad_frames": 0, "underruns": 0, "reconnects": 0}
+        self.recorded = None
+
+    @property
+    def done(self) -> bool:
+        return self.n_rows is not None and self.executed == self.n_rows - 1
+
+    def free(self) -> int:
+        return self.capacity - self.queued
+
+    def reply(self, typ: int) -> Frame:
+        return Frame(typ, self.n_axes, 0, self.next_tick, self.free(), self.executed)
+
+    def on_frame(self, f: Frame) -> Frame:
+        self.stats["frames"] += 1
+        if f.type == HELLO:
+            if self.n_rows is None:
+                self.n_rows, self.n_axes, self.tick_hz = f.count, f.n_axes, f.aux / 1000.0
+                if self.record_path:
+                    self.recorded = np.lib.format.open_memmap(
+                        self.record_path, mode="w+", dtype=np.int32, shape=(self.n_rows, self.n_axes)
+                    )
+            else:
+                self.stats["reconnects"] += 1
+            return self.reply(WELCOME)
+        if f.type == DATA:
+            if f.tick == self.next_tick and f.count <= self.free() and f.n_axes == self.n_axes:
+                self.buffer.append(np.array(f.rows))
+                self.queued += f.count
+                self.next_tick += f.count
+            elif f.tick < self.next_tick:
+                self.stats["duplicates"] += 1
+            else:
+                self.stats["gaps"] += 1
+            return self.reply(ACK)
+        if f.type == END:
+            self.ended = True
+        return self.reply(DONE if self.done else ACK)
+
+    def run_clock(self, now: float) -> None:
+        """Execute the rows that are due; start, hold or resume the clock."""
+        if self.n_rows is None or self.done:
+            return
+        all_in = self.next_tick >= self.n_rows
+        if not self.running:
+            if self.queued >= self.capacity // 2 or (all_in and self.queued) or (self.ended and self.queued):
+                self.running, self.t0, self.tick0 = True, now, self.executed + 1
+            return
+        due = self.tick0 + int((now - self.t0) * self.tick_hz * self.speed)
+        while self.executed < due and self.queued:
+            head = self.buffer[0]
+            take = min(len(head), due - self.executed)
+            first = self.executed + 1
+            if self.recorded is not None:
+                self.recorded[first : first + take] = head[:take]
+            self.executed += take
+            self.queued -= take
+            if take == len(head):
+                self.buffer.popleft()
+            else:
+                self.buffer[0] = head[take:]
+        if self.executed < due and not self.queued and not self.done:
+            self.stats["underruns"] += 1  # the drives hold the last position; the clock waits
+            self.running = False
+
+    def summary(self) -> dict:
+        if self.recorded is not None:
+            self.recorded.flush()
+        return {"executed": self.executed + 1, "n_rows": self.n_rows, **self.stats}
+
+
+def serve(spec: str, receiver: Receiver, idle_timeout: float = 30.0, out=sys.stdout) -> dict:
+    """Run the receiver on ``tcp://HOST:PORT`` or ``udp://HOST:PORT`` until the job is done."""
+    scheme, host, port = parse_address(spec)
+    kind = socket.SOCK_STREAM if scheme == "tcp" else socket.SOCK_DGRAM
+    srv = socket.socket(socket.AF_INET, kind)
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    srv.bind((host, port))
+    if scheme == "tcp":
+        srv.listen(1)
+    print(f"listening {scheme}://{host}:{srv.getsockname()[1]}", file=out, flush=True)
+    conn: FramedTCP | None = None
+    last_seen = time.monotonic()
+    done_at = None  # when DONE was last sent: linger a little for late END retries, then exit
+    try:
+        while True:
+            now = time.monotonic()
+            receiver.run_clock(now)
+            if done_at is not None and now - done_at > 0.5:
+                break
+            if now - last_seen > idle_timeout:
+                raise TimeoutError(f"no frame for {idle_timeout} s")
+            socks = [srv] + ([conn.sock] if conn else [])
+            ready, _, _ = select.select(socks, [], [], 0.0005)
+            for s in ready:
+                if scheme == "tcp" and s is srv:
+                    c, _ = srv.accept()
+                    c.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    if conn is not None:
+                        conn.sock.close()
+                    conn = FramedTCP(c)
+                    continue
+                try:
+                    if scheme == "tcp":
+                        f = conn.recv(0.05)
+                        if f is None:
+                            continue
+                        reply_to = None
+                    else:
+                        data, reply_to = srv.recvfrom(1 << 16)
+                        f = decode(data)
+                except ProtocolError:
+                    receiver.stats["bad_frames"] += 1
+                    continue
+                except (ConnectionError, OSError):
+                    conn = None  # link lost: keep the buffer running and wait for a reconnection
+                    continue
+                last_seen = time.monotonic()
+                receiver.run_clock(last_seen)
+                r = receiver.on_frame(f)
+                if r.type == DONE or (receiver.done and f.type == END):
+                    r = receiver.reply(DONE)
+                    done_at = time.monotonic()
+                try:
+                    if scheme == "tcp":
+                        conn.send(r)
+                    else:
+                        srv.sendto(r.encode(), reply_to)
+                except OSError:
+                    conn = None
+    finally:
+        if conn is not None:
+            conn.sock.close()
+        srv.close()
+    return receiver.summary()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m jaxcnc.hw.receiver", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("listen", help="tcp://HOST:PORT or udp://HOST:PORT (port 0: any free port)")
+    ap.add_argument("--record", help="write the executed rows to this .npy file")
+    ap.add_argument("--capacity", type=int, default=8192, help="buffer rows (default: %(default)s)")
+    ap.add_argument("--speed", type=float, default=1.0, help="clock speed-up over the table's tick rate")
+    ap.add_argument("--idle-timeout", type=float, default=30.0, help="give up after this many silent seconds")
+    args = ap.parse_args(argv)
+    stats = serve(args.listen, Receiver(args.capacity, args.speed, args.record), args.idle_timeout)
+    print(json.dumps(stats), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""The stream protocol over real loopback sockets to a receiver in another process, with faults."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jaxcnc.hw.player import play
+from jaxcnc.hw.receiver import Receiver
+from jaxcnc.hw.sinks.stream import Faults, StreamSink
+from jaxcnc.hw.stream import ACK, DATA, HELLO, WELCOME, Frame, ProtocolError, decode
+from jaxcnc.hw.tablefile import TableFile, TableWriter
+
+
+@pytest.fixture(scope="module")
+def table(tmp_path_factory):
+    n = 30_000
+    rng = np.random.default_rng(0)
+    pos = np.cumsum(rng.integers(-3, 4, (n, 3)), axis=0).astype(np.int32)
+    path = tmp_path_factory.mktemp("s") / "s.ticks"
+    with TableWriter(path, axes=["x", "y", "z"], tick_hz=10_000, discrete_mm=0.001, n_rows=n) as w:
+        w.write(pos, np.zeros_like(pos))
+    return TableFile(path)
+
+
+def test_frames_round_trip_and_damage_is_detected():
+    rows = np.arange(12, dtype=np.int32).reshape(4, 3)
+    f = Frame(DATA, 3, 7, 100, 4, 0, rows)
+    g = decode(f.encode())
+    assert (g.type, g.seq, g.tick, g.count) == (DATA, 7, 100, 4)
+    np.testing.assert_array_equal(g.rows, rows)
+    data = bytearray(f.encode())
+    for spot in (0, 10, 30, len(data) - 1):
+        bad = bytearray(data)
+        bad[spot] ^= 0x40
+        with pytest.raises(ProtocolError):
+            decode(bytes(bad))
+    with pytest.raises(ProtocolError):
+        decode(bytes(data[:20]))
+
+
+def test_receiver_takes_each_tick_once_in_order():
+    r = Receiver(capacity=100)
+    assert r.on_frame(Frame(HELLO, 2, 0, 0, 10, 1_000_000)).type == WELCOME
+    rows = np.arange(20, dtype=np.int32).reshape(10, 2)
+    assert r.on_frame(Frame(DATA, 2, 1, 4, 4, 0, rows[4:8])).tick == 0  # a gap: dropped, still needs 0
+    ack = r.on_frame(Frame(DATA, 2, 0, 0, 4, 0, rows[:4]))
+    assert (ack.type, ack.tick, ack.count) == (ACK, 4, 96)
+    assert r.on_frame(Frame(DATA, 2, 0, 0, 4, 0, rows[:4])).tick == 4  # duplicate: ignored
+    assert r.on_frame(Frame(DATA, 2, 1, 4, 6, 0, rows[4:])).tick == 10
+    assert r.stats["gaps"] == 1 and r.stats["duplicates"] == 1
+
+
+def _run(table, scheme: str, faults: Faults, tmp_path, capacity: int = 4096) -> tuple[dict, dict, np.ndarray]:
+    rec = tmp_path / f"rec_{scheme}.npy"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "jaxcnc.hw.receiver",
+            f"{scheme}://127.0.0.1:0",
+            "--record",
+            str(rec),
+            "--speed",
+            "20",
+            "--capacity",
+            str(capacity),
+            "--idle-timeout",
+            "20",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        addr = proc.stdout.readline().split()[1]
+        sink = StreamSink(addr, faults=faults)
+        result = play(table, sink)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert result.executed_tick == table.n_rows - 1
+    return sink.stats, json.loads(out.strip().splitlines()[-1]), np.load(rec)
+
+
+def test_tcp_with_a_disconnection_mid_job(table, tmp_path):
+    sent, got, rec = _run(table, "tcp", Faults(disconnect_after=40), tmp_path)
+    assert sent["reconnects"] == 1 and got["reconnects"] == 1
+    assert got["executed"] == table.n_rows
+    np.testing.assert_array_equal(rec, table.positions)  # every tick executed once, in order
+
+
+def test_udp_with_loss_duplication_and_reordering(table, tmp_path):
+    sent, got, rec = _run(table, "udp", Faults(drop=0.05, duplicate=0.05, reorder=0.05, seed=3), tmp_path)
+    assert sent["dropped"] > 0 and sent["duplicated"] > 0 and sent["reordered"] > 0
+    assert got["gaps"] > 0  # the faults reached the receiver ...
+    assert got["executed"] == table.n_rows
+    np.testing.assert_array_equal(rec, table.positions)  # ... and every tick was still executed exactly once
+
+
+def test_cli_plays_over_tcp(table, tmp_path):
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxcnc.hw.receiver", "tcp://127.0.0.1:0", "--speed", "50"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        addr = proc.stdout.readline().split()[1]
+        r = subprocess.run(
+            [sys.executable, "-m", "jaxcnc", "play", str(table.path), "--sink", addr, "--quiet"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert r.returncode == 0, r.stderr
+    assert json.loads(out.strip().splitlines()[-1])["executed"] == table.n_rows
+
+
+def test_unreachable_receiver_is_a_clean_error(table):
+    from jaxcnc.hw.sinks.stream import LinkError
+
+    sink = StreamSink("tcp://127.0.0.1:9", retries=3, timeout=0.01)
+    with pytest.raises(LinkError, match="cannot reach"):
+        sink.open(table.header)
