@@ -131,7 +131,8 @@ def test_no_jax_on_the_player_side():
     import sys
 
     code = (
-        "import sys; import jaxcnc.hw.tablefile, jaxcnc.hw.player, jaxcnc.hw.sinks, jaxcnc.ticks.verify; "
+        "import sys; import jaxcnc.hw.tablefile, jaxcnc.hw.player, jaxcnc.hw.sinks, jaxcnc.hw.sinks.stream, "
+        "jaxcnc.hw.receiver, jaxcnc.hw.timewarp, jaxcnc.ticks.verify; "
         "print('jax' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
