@@ -250,12 +250,14 @@ def cmd_expand(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from jaxcnc.bench import run_benchmarks, run_geometry_benchmarks
+    from jaxcnc.bench import run_benchmarks, run_geometry_benchmarks, run_player_benchmarks
 
     if args.suite in ("all", "plan"):
         run_benchmarks(n_blocks=args.blocks, repeats=args.repeats)
     if args.suite in ("all", "geometry"):
         run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
+    if args.suite in ("all", "player"):
+        run_player_benchmarks(seconds=args.seconds)
     return 0
 
 
@@ -360,11 +362,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--blocks", type=int, default=100_000, help="synthetic program size (default: %(default)s)")
     sp.add_argument("--repeats", type=int, default=5, help="steady-state repetitions (default: %(default)s)")
     sp.add_argument("--points", type=int, default=1_000_000, help="NURBS evaluation points (default: %(default)s)")
+    sp.add_argument("--seconds", type=float, default=60.0, help="player: table length in s (default: %(default)s)")
     sp.add_argument(
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "geometry"),
+        choices=("all", "plan", "geometry", "player"),
         help="which benchmarks (default: %(default)s)",
     )
     sp.set_defaults(func=cmd_bench)

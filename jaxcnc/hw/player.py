@@ -48,7 +48,7 @@ def play(table: TableFile, sink: Sink, *, chunk_rows: int = 4096, progress=None)
                 continue
             n = min(room, chunk_rows, h.n_rows - sent)
             lo, hi = np.searchsorted(ev_ticks, [sent, sent + n])
-            sink.write(sent, np.asarray(table.positions[sent : sent + n]), events[lo:hi])
+            sink.write(sent, table.read_positions(sent, sent + n), events[lo:hi])
             sent += n
     finally:
         sink.close()

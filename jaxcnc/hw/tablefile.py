@@ -295,6 +295,7 @@ class TableFile:
 
     def __init__(self, path: str | Path, verify: bool = True):
         self.path = Path(path)
+        self._fd: int | None = None
         try:
             size = self.path.stat().st_size
             with open(self.path, "rb") as f:
@@ -349,18 +350,52 @@ class TableFile:
         return TableFileError(f"{self.path}: {reason}")
 
     def verify(self) -> None:
-        """Check every block's CRC and the events' CRC; raise on the first damage found."""
+        """Check every block's CRC and the events' CRC; raise on the first damage found.
+
+        Blocks are read with ``pread`` (not through the memory map), so verifying a table of any
+        size keeps only one block in memory.
+        """
         h = self.header
-        for ch, arr in enumerate((self._pos, self._fine)):
-            if arr is None:
-                continue
-            raw = arr.reshape(h.n_blocks, -1)
-            for b in range(h.n_blocks):
-                if zlib.crc32(raw[b].tobytes()) != self._crc[ch, b]:
+        with open(self.path, "rb") as f:
+            fd = f.fileno()
+            for ch, base in enumerate((h.data_offset, h.fine_offset)):
+                if ch == 1 and not h.has_fine:
+                    break
+                for b in range(h.n_blocks):
+                    data = os.pread(fd, h.block_bytes, base + b * h.block_bytes)
+                    if zlib.crc32(data) == self._crc[ch, b]:
+                        continue
                     first = b * h.block_rows
                     last = min(first + h.block_rows, h.n_rows) - 1
                     what = "position" if ch == 0 else "fine"
                     raise self._err(f"{what} block {b} (ticks {first}-{last}) fails its checksum (damaged data)")
+        if zlib.crc32(self.events.tobytes()) != h.events_crc:
+            raise self._err("event records fail their checksum (damaged events)")
+
+    def close(self) -> None:
+        """Release the file descriptor :meth:`read_positions` uses (the memory maps stay valid)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def __del__(self) -> None:
+        self.close()
+
+    def read_positions(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start:stop`` of the positions, read with ``pread`` into a fresh array.
+
+        The player streams with this: unlike slices of the memory map it leaves no file pages
+        mapped into the process, so a table of any length plays in bounded memory.
+        """
+        h = self.header
+        start, stop = max(0, start), min(stop, h.n_rows)
+        if stop <= start:
+            return np.zeros((0, h.n_axes), np.int32)
+        row = h.n_axes * 4
+        if self._fd is None:
+            self._fd = os.open(self.path, os.O_RDONLY)
+        data = os.pread(self._fd, (stop - start) * row, h.data_offset + start * row)
+        return np.frombuffer(data, dtype="<i4").reshape(stop - start, h.n_axes).astype(np.int32)
         if zlib.crc32(self.events.tobytes()) != h.events_crc:
             raise self._err("event records fail their checksum (damaged events)")
 
