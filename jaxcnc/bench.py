@@ -314,6 +314,7 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
     from pathlib import Path
 
     from jaxcnc.hw.player import play
+    from jaxcnc.hw.receiver import spawn
     from jaxcnc.hw.sinks.sim import SimSink
     from jaxcnc.hw.sinks.stream import StreamSink
     from jaxcnc.hw.tablefile import TableFile, TableWriter
@@ -353,22 +354,8 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
                 f"{res.real_time_factor:,.0f}x real time; player process: {anon:.0f} MB anonymous memory "
                 f"(peak resident {hwm:.0f} MB incl. mapped file pages)"
             )
-            proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "jaxcnc.hw.receiver",
-                    "tcp://127.0.0.1:0",
-                    "--speed",
-                    "1e6",
-                    "--capacity",
-                    "65536",
-                ],
-                stdout=subprocess.PIPE,
-                text=True,
-            )
+            proc, addr = spawn("tcp://127.0.0.1:0", "--speed", "1e6", "--capacity", "65536")
             try:
-                addr = proc.stdout.readline().split()[1]
                 res_tcp = play(table, StreamSink(addr), chunk_rows=65536)
                 proc.communicate(timeout=120)
             finally:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from jaxcnc.hw.player import play
-from jaxcnc.hw.receiver import Receiver
+from jaxcnc.hw.receiver import Receiver, spawn
 from jaxcnc.hw.sinks.stream import Faults, StreamSink
 from jaxcnc.hw.stream import ACK, DATA, HELLO, WELCOME, Frame, ProtocolError, decode
 from jaxcnc.hw.tablefile import TableFile, TableWriter
@@ -57,26 +57,9 @@ def test_receiver_takes_each_tick_once_in_order():
 
 def _run(table, scheme: str, faults: Faults, tmp_path, capacity: int = 4096) -> tuple[dict, dict, np.ndarray]:
     rec = tmp_path / f"rec_{scheme}.npy"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "jaxcnc.hw.receiver",
-            f"{scheme}://127.0.0.1:0",
-            "--record",
-            str(rec),
-            "--speed",
-            "20",
-            "--capacity",
-            str(capacity),
-            "--idle-timeout",
-            "20",
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    opts = ("--record", str(rec), "--speed", "20", "--capacity", str(capacity), "--idle-timeout", "20")
+    proc, addr = spawn(f"{scheme}://127.0.0.1:0", *opts)
     try:
-        addr = proc.stdout.readline().split()[1]
         sink = StreamSink(addr, faults=faults)
         result = play(table, sink)
         out, _ = proc.communicate(timeout=30)
@@ -102,13 +85,8 @@ def test_udp_with_loss_duplication_and_reordering(table, tmp_path):
 
 
 def test_cli_plays_over_tcp(table, tmp_path):
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "jaxcnc.hw.receiver", "tcp://127.0.0.1:0", "--speed", "50"],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    proc, addr = spawn("tcp://127.0.0.1:0", "--speed", "50")
     try:
-        addr = proc.stdout.readline().split()[1]
         r = subprocess.run(
             [sys.executable, "-m", "jaxcnc", "play", str(table.path), "--sink", addr, "--quiet"],
             capture_output=True,

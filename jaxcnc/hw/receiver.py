@@ -207,3 +207,21 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def spawn(listen: str = "tcp://127.0.0.1:0", *options: str) -> tuple:
+    """Start a receiver process; return ``(process, address it listens on)``.
+
+    ``options`` are command-line options (``"--speed", "20"``, ...). The caller waits for the
+    process (its last stdout line is the JSON summary) and kills it in any case.
+    """
+    import subprocess
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxcnc.hw.receiver", listen, *options], stdout=subprocess.PIPE, text=True
+    )
+    line = proc.stdout.readline().split()
+    if len(line) != 2 or line[0] != "listening":
+        proc.kill()
+        raise RuntimeError(f"receiver did not start: {' '.join(line)!r}")
+    return proc, line[1]
