@@ -106,3 +106,13 @@ def test_unreachable_receiver_is_a_clean_error(table):
     sink = StreamSink("tcp://127.0.0.1:9", retries=3, timeout=0.01)
     with pytest.raises(LinkError, match="cannot reach"):
         sink.open(table.header)
+
+
+def test_scanner_lists_double_buffered(table):
+    from jaxcnc.hw.sinks.scanner import ScannerSink
+
+    sink = ScannerSink(list_rows=4096)
+    result = play(table, sink, chunk_rows=1000)
+    assert result.executed_tick == table.n_rows - 1
+    np.testing.assert_array_equal(sink.recorded, table.positions)
+    assert sink.lists_run == -(-table.n_rows // 4096)  # only complete lists ran; the last one partial

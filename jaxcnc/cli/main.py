@@ -311,8 +311,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument(
         "--sink",
         default="sim",
-        help="where to play: sim (in-process virtual drives), tcp://HOST:PORT or "
-        "udp://HOST:PORT (the stream protocol; see python -m jaxcnc.hw.receiver)",
+        help="where to play: sim (in-process virtual drives), scanner (command-list board emulation), "
+        "tcp://HOST:PORT or udp://HOST:PORT (the stream protocol; see python -m jaxcnc.hw.receiver)",
     )
     sp.add_argument("--record", help="sim: save the executed drive positions to this .npy file")
     sp.add_argument("--realtime", action="store_true", help="sim: run the virtual clock in wall-clock time")

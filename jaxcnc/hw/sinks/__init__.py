@@ -8,9 +8,13 @@ from jaxcnc.hw.sinks.sim import SimSink
 
 
 def open_sink(spec: str, **options) -> Sink:
-    """The sink named by ``spec`` (``sim``, ``tcp://HOST:PORT``, ``udp://HOST:PORT``)."""
+    """The sink named by ``spec`` (``sim``, ``scanner``, ``tcp://HOST:PORT``, ``udp://HOST:PORT``)."""
     if spec == "sim":
         return SimSink(**options)
+    if spec == "scanner":
+        from jaxcnc.hw.sinks.scanner import ScannerSink
+
+        return ScannerSink(**options)
     if spec.startswith(("tcp://", "udp://")):
         from jaxcnc.hw.sinks.stream import StreamSink
 
@@ -18,7 +22,9 @@ def open_sink(spec: str, **options) -> Sink:
             return StreamSink(spec, **options)
         except ValueError as exc:
             raise JaxcncError(str(exc)) from None
-    raise JaxcncError(f"unknown or not yet supported sink {spec!r}; available: sim, tcp://HOST:PORT, udp://HOST:PORT")
+    raise JaxcncError(
+        f"unknown or not yet supported sink {spec!r}; available: sim, scanner, tcp://HOST:PORT, udp://HOST:PORT"
+    )
 
 
 __all__ = ["SimSink", "Sink", "open_sink"]
