@@ -140,12 +140,14 @@ def _chebval_rows(series: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def refine_curved(
-    coeffs: np.ndarray, origin: np.ndarray, owner: np.ndarray, max_rounds: int = 12
+    coeffs: np.ndarray, origin: np.ndarray, owner: np.ndarray, max_rounds: int = 12, split=None
 ) -> dict[str, np.ndarray]:
     """Subdivide curved spans until their length and ``s(u)``/``u(s)`` fits are certified.
 
     Args:
         coeffs ``(S, p+1, 4)``, origin ``(S, 3)``, owner ``(S,)`` (any per-span tag carried along).
+        split: optional ``coeffs -> (S,) bool``, more spans to subdivide (e.g. where the curvature
+            varies too much for one speed cap).
     Returns:
         dict of ``coeffs, origin, owner, length, length_err, cheb_s (S', N+1), cheb_u (S', N)``
         in path order (a split span's halves stay in place).
@@ -156,6 +158,8 @@ def refine_curved(
     for rnd in range(max_rounds):
         length, err = gl_length(coeffs)
         s_series, u_series, ok = _fits(coeffs, length)
+        if split is not None:
+            ok = ok & ~split(coeffs)
         ok = ok | (rnd == max_rounds - 1)
         done.append(
             dict(

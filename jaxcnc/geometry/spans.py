@@ -27,13 +27,16 @@ import numpy as np
 
 from jaxcnc.geometry.arclength import CHEB_N, derivatives, refine_curved
 from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
-from jaxcnc.geometry.curvature import curvature_max, extents
+from jaxcnc.geometry.curvature import curvature, curvature_max, extents
 from jaxcnc.program import Kind, Program
 
 #: Span degrees are bucketed to these values.
 DEGREE_BUCKETS = (2, 3, 5, 7)
 #: Motion rows shorter than this (mm) move nothing and produce no span.
 MIN_LENGTH_MM = 1e-9
+#: Curve spans are split until their curvature varies by at most this factor (above the floor).
+CURVATURE_SPREAD = 1.25
+CURVATURE_FLOOR = 1e-3  # 1/mm: curvature below this (radius over 1 m) does not limit speed
 #: Helical arcs are represented within this distance (mm) of the true helix.
 HELIX_TOL_MM = 1e-4
 #: z departure from "linear in the angle" of a 90° rational quadratic piece, per unit rise.
@@ -235,9 +238,21 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return np.where(use, v / np.where(use, n, 1.0), fallback / np.where(f > 0, f, 1.0))
 
 
+def _curvature_varies(coeffs: np.ndarray) -> np.ndarray:
+    """``(S,)`` bool: the curvature over the span varies by more than ``CURVATURE_SPREAD``.
+
+    The planner caps a span's speed by its maximum curvature, so a span whose curvature varies a
+    lot is planned slower than it could go: such spans are split.
+    """
+    kappa = curvature(coeffs, np.broadcast_to(np.linspace(0, 1, 17), (coeffs.shape[0], 17)))
+    hi, lo = kappa.max(axis=1), kappa.min(axis=1)
+    return hi > CURVATURE_SPREAD * lo + CURVATURE_FLOOR
+
+
 def _certified(coeffs: np.ndarray, origin: np.ndarray, owner: np.ndarray) -> dict[str, np.ndarray]:
-    """Curve pieces → certified spans (subdivided until length and ``u(s)`` fits converge)."""
-    fit = refine_curved(coeffs, origin, owner)
+    """Curve pieces → certified spans (subdivided until length and ``u(s)`` fits converge and the
+    curvature is nearly constant on each)."""
+    fit = refine_curved(coeffs, origin, owner, split=_curvature_varies)
     c = fit["coeffs"]
     _, d1_0, d2_0 = (x[:, 0] for x in derivatives(c, np.zeros((c.shape[0], 1)), 2))
     _, d1_1, d2_1 = (x[:, 0] for x in derivatives(c, np.ones((c.shape[0], 1)), 2))
