@@ -115,6 +115,8 @@ def _fits(coeffs: np.ndarray, length: np.ndarray) -> tuple[np.ndarray, np.ndarra
     for _ in range(60):
         x = 2 * u - 1
         f = _chebval_rows(s_series, x) - target
+        if np.all(np.abs(f) <= 1e-14 * np.maximum(length, 1.0)[:, None]):
+            break  # converged (quadratically: a handful of steps)
         fp = 2 * _chebval_rows(ds, x)
         u = np.clip(u - f / np.where(fp > 0, fp, np.inf), 0.0, 1.0)
     u_series = _cheb_coeffs(u)
@@ -140,14 +142,15 @@ def _chebval_rows(series: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def refine_curved(
-    coeffs: np.ndarray, origin: np.ndarray, owner: np.ndarray, max_rounds: int = 12, split=None
+    coeffs: np.ndarray, origin: np.ndarray, owner: np.ndarray, max_rounds: int = 12, split=None, split_rounds: int = 3
 ) -> dict[str, np.ndarray]:
     """Subdivide curved spans until their length and ``s(u)``/``u(s)`` fits are certified.
 
     Args:
         coeffs ``(S, p+1, 4)``, origin ``(S, 3)``, owner ``(S,)`` (any per-span tag carried along).
         split: optional ``coeffs -> (S,) bool``, more spans to subdivide (e.g. where the curvature
-            varies too much for one speed cap).
+            varies too much for one speed cap), in the first ``split_rounds`` rounds only (at most
+            ``2**split_rounds`` pieces per span for that reason: near a cusp the ratio never settles).
     Returns:
         dict of ``coeffs, origin, owner, length, length_err, cheb_s (S', N+1), cheb_u (S', N)``
         in path order (a split span's halves stay in place).
@@ -158,7 +161,7 @@ def refine_curved(
     for rnd in range(max_rounds):
         length, err = gl_length(coeffs)
         s_series, u_series, ok = _fits(coeffs, length)
-        if split is not None:
+        if split is not None and rnd < split_rounds:
             ok = ok & ~split(coeffs)
         ok = ok | (rnd == max_rounds - 1)
         done.append(

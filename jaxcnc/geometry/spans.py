@@ -35,7 +35,7 @@ DEGREE_BUCKETS = (2, 3, 5, 7)
 #: Motion rows shorter than this (mm) move nothing and produce no span.
 MIN_LENGTH_MM = 1e-9
 #: Curve spans are split until their curvature varies by at most this factor (above the floor).
-CURVATURE_SPREAD = 1.25
+CURVATURE_SPREAD = 1.5
 CURVATURE_FLOOR = 1e-3  # 1/mm: curvature below this (radius over 1 m) does not limit speed
 #: Helical arcs are represented within this distance (mm) of the true helix.
 HELIX_TOL_MM = 1e-4
