@@ -282,8 +282,6 @@ class Preprocessor:
                 i += 1
                 continue
             i = self.control(stack, ol)
-            if i < 0:  # endsub/return of the main program? (not reachable) or M2 handled by interpreter
-                break
         if len(stack) > 1:
             raise self.err(n - 1, 0, "the program ends inside a subroutine")
         return out

@@ -17,33 +17,6 @@ import jax.numpy as jnp
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 
 
-def _power_derivatives(c: jnp.ndarray, u: jnp.ndarray, order: int) -> list[jnp.ndarray]:
-    """``[H, H', ..., H^(order)]`` of ``H(u) = sum_k c_k u^k`` by Horner's scheme.
-
-    Horner with derivatives: running ``d_r`` (the r-th derivative over r!) are updated from the
-    highest coefficient down, ``d_r ← d_r u + d_(r-1)``, ``d_0 ← d_0 u + c_k``.
-
-    Args:
-        c: ``(m, degree+1, 4)`` coefficients, one span per query.
-        u: ``(m,)`` parameters.
-    Returns:
-        ``order+1`` arrays of shape ``(m, 4)``.
-    """
-    deg = c.shape[-2] - 1
-    uu = u[:, None]
-    d = [c[:, deg, :]] + [jnp.zeros_like(c[:, deg, :]) for _ in range(order)]
-    for k in range(deg - 1, -1, -1):
-        for r in range(min(order, deg - k), 0, -1):
-            d[r] = d[r] * uu + d[r - 1]
-        d[0] = d[0] * uu + c[:, k, :]
-    fact = 1.0
-    out = [d[0]]
-    for r in range(1, order + 1):
-        fact *= r
-        out.append(fact * d[r])
-    return out
-
-
 def evaluate(coeffs: jnp.ndarray, origin: jnp.ndarray, u: jnp.ndarray, order: int = 0) -> tuple[jnp.ndarray, ...]:
     """Position and derivatives up to ``order`` (≤ 3) of rational spans at ``u``.
 
@@ -54,25 +27,18 @@ def evaluate(coeffs: jnp.ndarray, origin: jnp.ndarray, u: jnp.ndarray, order: in
     Returns:
         ``(P, P', ..., P^(order))``, each ``(m, 3)``; ``P`` in mm, derivatives per unit ``u``.
     """
-    if not 0 <= order <= 3:
-        raise ValueError("order must be 0, 1, 2 or 3")
-    h = _power_derivatives(coeffs, u, order)
-    w = [x[:, 3:] for x in h]
-    q = h[0][:, :3] / w[0]
-    d = [q]
-    if order >= 1:
-        d.append((h[1][:, :3] - q * w[1]) / w[0])
-    if order >= 2:
-        d.append((h[2][:, :3] - 2.0 * d[1] * w[1] - q * w[2]) / w[0])
-    if order >= 3:
-        d.append((h[3][:, :3] - 3.0 * d[2] * w[1] - 3.0 * d[1] * w[2] - q * w[3]) / w[0])
-    return (origin + q, *d[1:])
+    rows = jnp.arange(u.shape[0])
+    return evaluate_spans(jnp.transpose(coeffs, (1, 2, 0)), jnp.transpose(origin), rows, u, order)
 
 
 def evaluate_spans(
     coeffs_t: jnp.ndarray, origin_t: jnp.ndarray, seg: jnp.ndarray, u: jnp.ndarray, order: int = 0
 ) -> tuple[jnp.ndarray, ...]:
-    """:func:`evaluate` on span ``seg[i]`` at ``u[i]``, gathering coefficients column by column.
+    """Position and derivatives of span ``seg[i]`` at ``u[i]``, gathering coefficients column by column.
+
+    Horner's scheme with derivatives: running ``d_r`` (the r-th derivative over r!) are updated
+    from the highest coefficient down, ``d_r ← d_r u + d_(r-1)``, ``d_0 ← d_0 u + c_k``; then the
+    quotient rule of the module docstring.
 
     Args:
         coeffs_t: ``(degree+1, 4, n_spans)`` — the span coefficients transposed so that each

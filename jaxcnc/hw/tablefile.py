@@ -24,7 +24,6 @@ import json
 import os
 import struct
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -427,15 +426,3 @@ class TableFile:
         if self._fine is not None:
             p = p + self.fine[start:stop].astype(np.float64) / FINE_SCALE
         return p * self.header.discrete_mm
-
-    def chunks(self, rows: int = 65536, overlap: int = 0) -> Iterator[tuple[int, np.ndarray, np.ndarray | None]]:
-        """Yield ``(first_row, positions, fine)`` for consecutive chunks; ``overlap`` rows repeat
-        the end of the previous chunk (for finite differences across chunk boundaries)."""
-        n = self.header.n_rows
-        start = 0
-        while start < n:
-            lo = max(0, start - overlap)
-            stop = min(n, start + rows)
-            fine = None if self._fine is None else np.asarray(self._fine[lo:stop])
-            yield lo, np.asarray(self._pos[lo:stop]), fine
-            start = stop

@@ -138,16 +138,24 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
     return out
 
 
+#: The per-segment fields of :class:`Plan` the tick kernels read (as a dict of JAX arrays).
+PLAN_KEYS = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
+
+
+def local_time(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
+    """Seconds since segment ``seg`` started at integer ``tick``, from exact integer tick differences."""
+    tau = ((tick - plan["group_tick"][seg]).astype(jnp.float64) - plan["offset_ticks"][seg]) / tick_hz
+    return jnp.maximum(tau, 0.0)
+
+
 def s_at(
     plan: dict[str, jnp.ndarray], length: jnp.ndarray, seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float
 ) -> jnp.ndarray:
     """Arc length from the start of segment ``seg`` at integer ``tick`` (arrays ``(m,)``).
 
-    ``plan`` holds the per-segment arrays of :class:`Plan` (as JAX arrays).
+    ``plan`` holds the per-segment arrays of :class:`Plan` (as JAX arrays, ``PLAN_KEYS``).
     """
-    g = plan["group_tick"][seg]
-    tau = ((tick - g).astype(jnp.float64) - plan["offset_ticks"][seg]) / tick_hz
-    tau = jnp.maximum(tau, 0.0)
+    tau = local_time(plan, seg, tick, tick_hz)
     v0, vp, aa, ad = plan["v0"][seg], plan["vp"][seg], plan["a_acc"][seg], plan["a_dec"][seg]
     ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
     l_acc = v0 * ta + 0.5 * aa * ta**2
@@ -161,7 +169,7 @@ def s_at(
 
 def v_at(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
     """Path speed (mm/s) on segment ``seg`` at integer ``tick`` (arrays ``(m,)``)."""
-    tau = jnp.maximum(((tick - plan["group_tick"][seg]).astype(jnp.float64) - plan["offset_ticks"][seg]) / tick_hz, 0)
+    tau = local_time(plan, seg, tick, tick_hz)
     ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
     v_acc = plan["v0"][seg] + plan["a_acc"][seg] * jnp.minimum(tau, ta)
     v_dec = plan["vp"][seg] - plan["a_dec"][seg] * jnp.clip(tau - ta - tc, 0.0, td)
@@ -174,10 +182,9 @@ def sample_plan(plan: Plan, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     ``s_mm`` is the path length from the program start — the ``s(t)`` researchers compare
     between planners; ``v_mm_s`` its derivative.
     """
-    keys = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks")
-    arrays = {k: jnp.asarray(getattr(plan, k)) for k in keys}
+    arrays = {k: jnp.asarray(getattr(plan, k)) for k in PLAN_KEYS}
     t = jnp.asarray(np.asarray(ticks, dtype=np.int64))
-    seg = segment_of_tick(jnp.asarray(plan.first_tick), t)
+    seg = segment_of_tick(arrays["first_tick"], t)
     length = jnp.asarray(plan.length)
     s_local = s_at(arrays, length, seg, t, plan.tick_hz)
     s0 = jnp.concatenate([jnp.zeros(1), jnp.cumsum(length)[:-1]])

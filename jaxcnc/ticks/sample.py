@@ -21,11 +21,10 @@ from jaxcnc.geometry.inverse import span_arrays, u_of_s
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.hw.tablefile import FINE_SCALE
 from jaxcnc.planners.job import PlannedJob
-from jaxcnc.planners.timelaw import s_at, segment_of_tick
+from jaxcnc.planners.timelaw import PLAN_KEYS, s_at, segment_of_tick
 from jaxcnc.planners.trapezoid import bucket_size
 
 CHUNK_TICKS = 1 << 16
-_PLAN_KEYS = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
 
 
 @partial(jax.jit, static_argnames=("chunk",))
@@ -79,7 +78,7 @@ class TickSampler:
         def pad(a: np.ndarray, fill) -> np.ndarray:
             return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
 
-        self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in _PLAN_KEYS}
+        self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in PLAN_KEYS}
         self._spans = span_arrays(pad_spans(spans, m))
         m_axes = job.machine.axis_names
         self._src = np.asarray(job.axis_source)
