@@ -14,11 +14,14 @@ import time
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
+
 import jaxcnc
 from jaxcnc.errors import JaxcncError
 
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
-LATER_SUFFIXES = {".dxf": "DXF", ".stl": "STL", ".xyz": "point files", ".csv": "point files"}
+POINT_SUFFIXES = (".xyz", ".csv")
+LATER_SUFFIXES = {".dxf": "DXF", ".stl": "STL"}
 
 
 def _fmt_axes(d: dict[str, float], unit: str) -> str:
@@ -33,28 +36,72 @@ def _load_program(path: Path, machine, dialect: str | None = None):
     if suffix in LATER_SUFFIXES:
         raise JaxcncError(f"{path}: {LATER_SUFFIXES[suffix]} input is not supported yet")
     if suffix not in GCODE_SUFFIXES:
-        raise JaxcncError(f"{path}: unknown input type {suffix!r}; G-code files end in {', '.join(GCODE_SUFFIXES)}")
+        raise JaxcncError(
+            f"{path}: unknown input type {suffix!r}; G-code files end in {', '.join(GCODE_SUFFIXES)}, "
+            f"point files in {', '.join(POINT_SUFFIXES)}"
+        )
     start = program_start(machine)
     return load_gcode(path, start=start, home=start, dialect=dialect)
+
+
+def is_point_job(input_path: Path, machine) -> bool:
+    """Point-by-point pulsed engraving: a point file, or G-code on a machine whose laser is pulsed."""
+    suffix = input_path.suffix.lower()
+    if suffix in POINT_SUFFIXES:
+        if machine.laser.mode != "pulsed":
+            raise JaxcncError(
+                f'{input_path}: point files are burned point by point, which needs [laser] mode = "pulsed" '
+                f"(machine {machine.name!r} has mode {machine.laser.mode!r})"
+            )
+        return True
+    return machine.laser.mode == "pulsed"
+
+
+def load_point_job(input_path: Path, machine, dialect: str | None = None):
+    """The points of a point job: read from a point file, or the G1 end points of a program."""
+    from jaxcnc.io.points import points_from_program, read_points
+
+    if input_path.suffix.lower() in POINT_SUFFIXES:
+        return read_points(input_path)
+    return points_from_program(_load_program(input_path, machine, dialect))
 
 
 def plan_file(
     input_path: Path,
     machine_path: Path,
     out: Path,
-    planner: str = "lookahead",
+    planner: str | None = None,
     progress: bool | None = None,
     dialect: str | None = None,
+    reorder: bool = False,
 ) -> dict:
     """Plan ``input_path`` on the machine and write the table; return the report dict."""
-    from jaxcnc.hw.tablefile import TableFile
     from jaxcnc.machine import load_machine
+
+    machine = load_machine(machine_path)
+    if is_point_job(input_path, machine):
+        return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
+    if reorder:
+        raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
+    return plan_program_file(input_path, machine, out, planner or "lookahead", progress, dialect)
+
+
+def _measured(meas) -> dict:
+    return {"max_abs_v": meas.max_abs_v, "max_abs_a": meas.max_abs_a, "max_abs_j": meas.max_abs_j}
+
+
+def _limits(machine) -> dict:
+    return {a.name: {"v_max": a.v_max, "a_max": a.a_max, "j_max": a.j_max} for a in machine.axes}
+
+
+def plan_program_file(input_path: Path, machine, out: Path, planner: str, progress, dialect) -> dict:
+    """Plan a contour program (G-code) and write its table; the report dict."""
+    from jaxcnc.hw.tablefile import TableFile
     from jaxcnc.planners import plan_job
     from jaxcnc.ticks.table import write_table
     from jaxcnc.ticks.verify import measure_table
 
     t0 = time.perf_counter()
-    machine = load_machine(machine_path)
     program = _load_program(input_path, machine, dialect)
     t_parse = time.perf_counter()
     job = plan_job(program, machine, planner=planner)
@@ -63,7 +110,7 @@ def plan_file(
     t_ticks = time.perf_counter()
     meas = measure_table(TableFile(out), machine)
     t_check = time.perf_counter()
-    report = {
+    return {
         "input": str(input_path),
         "machine": machine.name,
         "table": str(out),
@@ -81,12 +128,72 @@ def plan_file(
             "ticks": t_ticks - t_plan,
             "verify": t_check - t_ticks,
         },
-        "max_abs_v": meas.max_abs_v,
-        "max_abs_a": meas.max_abs_a,
-        "max_abs_j": meas.max_abs_j,
-        "limits": {a.name: {"v_max": a.v_max, "a_max": a.a_max, "j_max": a.j_max} for a in machine.axes},
+        **_measured(meas),
+        "limits": _limits(machine),
         "violations": [str(v) for v in meas.violations],
     }
+
+
+def plan_points_file(
+    input_path: Path, machine, out: Path, planner: str | None, progress, dialect, reorder: bool
+) -> dict:
+    """Plan a point-by-point pulsed job and write its table; the report dict (with the comparisons)."""
+    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.planners.pulsed import DEFAULT_PULSE_PLANNER, plan_points
+    from jaxcnc.planners.pulsed.reorder import serpentine_order
+    from jaxcnc.ticks.pulses import write_pulse_table
+    from jaxcnc.ticks.verify import measure_table
+    from jaxcnc.ticks.verify_pulses import check_pulses
+
+    planner = planner or DEFAULT_PULSE_PLANNER
+    t0 = time.perf_counter()
+    given = load_point_job(input_path, machine, dialect)
+    t_parse = time.perf_counter()
+    job = given.take(serpentine_order(given.points)) if reorder else given
+    planned = plan_points(job, machine, planner)
+    t_plan = time.perf_counter()
+    write_pulse_table(planned, out, progress=progress)
+    t_ticks = time.perf_counter()
+    table = TableFile(out)
+    meas = measure_table(table, machine)
+    pulses = check_pulses(table, machine, given)
+    t_check = time.perf_counter()
+    plan = planned.plan
+    old = plan_points(job, machine, "stop-and-go").plan if planner != "stop-and-go" else plan
+    report = {
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": planner,
+        "n_points": len(job),
+        "n_pulses": plan.n_pulses,
+        "n_idle_pulses": int(plan.idle_tick.shape[0]),
+        "total_time_s": plan.trajectory.total_time_s,
+        "burn_time_s": plan.burn_time_s,
+        "lower_bound_s": planned.lower_bound_s,
+        "stop_and_go_s": old.burn_time_s,
+        "ratio_to_lower_bound": plan.burn_time_s / planned.lower_bound_s if planned.lower_bound_s > 0 else None,
+        "reduction_vs_stop_and_go": 1.0 - plan.burn_time_s / old.burn_time_s if old.burn_time_s > 0 else 0.0,
+        "n_ticks": plan.trajectory.n_ticks + 1,
+        "tick_hz": machine.tick_hz,
+        "pulse_hz": planned.window.pulse_hz,
+        "pulse_window_ticks": [planned.window.n_min, planned.window.n_max],
+        "path_length_mm": float(np.sum(np.linalg.norm(np.diff(job.points, axis=0), axis=1))),
+        "plan_wall_s": t_ticks - t0,
+        "timings_s": {
+            "parse": t_parse - t0,
+            "plan": planned.plan_wall_s,
+            "ticks": t_ticks - t_plan,
+            "verify": t_check - t_ticks,
+        },
+        "planner_stats": plan.stats,
+        **_measured(meas),
+        "max_miss_mm": pulses.max_miss_mm,
+        "limits": _limits(machine),
+        "violations": [str(v) for v in meas.violations + pulses.violations],
+    }
+    if reorder:
+        report["as_given_burn_time_s"] = plan_points(given, machine, planner).plan.burn_time_s
     return report
 
 
@@ -98,10 +205,29 @@ def cmd_plan(args: argparse.Namespace) -> int:
         args.planner,
         progress=False if args.quiet else None,
         dialect=args.dialect,
+        reorder=args.reorder,
     )
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
-    if not args.quiet:
+    if not args.quiet and "n_points" in report:
+        print(
+            f"planned {report['input']}: {report['n_points']} points, {report['n_pulses']} pulses "
+            f"({report['n_idle_pulses']} idle), planner {report['planner']} "
+            f"-> {report['table']} ({report['plan_wall_s']:.2f} s)"
+        )
+        print(
+            f"  burn time {report['burn_time_s']:.3f} s = {report['ratio_to_lower_bound']:.4f} x the lower bound "
+            f"{report['lower_bound_s']:.3f} s; stop-and-go {report['stop_and_go_s']:.3f} s "
+            f"(-{100 * report['reduction_vs_stop_and_go']:.1f} %)"
+        )
+        if "as_given_burn_time_s" in report:
+            print(f"  as given (not re-ordered): {report['as_given_burn_time_s']:.3f} s")
+        print(
+            f"  measured on the table: max |v| {_fmt_axes(report['max_abs_v'], 'mm/s')}; "
+            f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}; beam within "
+            f"{report['max_miss_mm'] * 1e3:.2g} µm of every point at its pulse"
+        )
+    elif not args.quiet:
         print(
             f"planned {report['input']}: {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm, "
             f"{report['total_time_s']:.3f} s = {report['n_ticks']} ticks at {report['tick_hz']:g} Hz "
@@ -115,25 +241,53 @@ def cmd_plan(args: argparse.Namespace) -> int:
         for line in report["violations"][:50]:
             print(f"violation: {line}", file=sys.stderr)
         print(
-            "jaxcnc: error: the planned table breaks the machine limits (a planner bug; please report it)",
+            "jaxcnc: error: the planned table breaks the machine limits or pulse windows (a planner bug; "
+            "please report it)",
             file=sys.stderr,
         )
         return 1
     return 0
 
 
-def check_table(table_path: Path, machine_path: Path):
-    from jaxcnc.hw.tablefile import TableFile
+def check_table(table_path: Path, machine_path: Path, points: Path | None = None):
+    """Verify a table: checksums, limits, travel and, for pulsed tables, pulses. ``(table, measurement)``.
+
+    The measurement's violations include the pulse problems; its ``pulses`` attribute holds the
+    pulse check (``None`` for tables without work pulses).
+    """
+    from jaxcnc.hw.tablefile import EventKind, TableFile
     from jaxcnc.machine import load_machine
     from jaxcnc.ticks.verify import measure_table
 
     machine = load_machine(machine_path)
     table = TableFile(table_path)  # verifies every checksum
-    return table, measure_table(table, machine)
+    meas = measure_table(table, machine)
+    if np.any(table.events["kind"] == EventKind.WORK_PULSE):
+        from jaxcnc.ticks.verify_pulses import check_pulses
+
+        job = _points_of_table(table, machine, points)
+        meas.pulses = check_pulses(table, machine, job)
+        meas.violations.extend(meas.pulses.violations)
+    return table, meas
+
+
+def _points_of_table(table, machine, points: Path | None):
+    import hashlib
+
+    meta = table.header.meta
+    source = Path(points) if points else Path(str(meta.get("source", "")))
+    if not source.is_file():
+        raise JaxcncError(
+            f"{table.path}: the table burns points from {str(source)!r}, which is not here; pass --points FILE"
+        )
+    if points is None and meta.get("source_sha256"):
+        if hashlib.sha256(source.read_bytes()).hexdigest() != meta["source_sha256"]:
+            raise JaxcncError(f"{source}: changed since the table was planned (checksum differs); pass --points FILE")
+    return load_point_job(source, machine)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    table, meas = check_table(Path(args.table), Path(args.machine))
+    table, meas = check_table(Path(args.table), Path(args.machine), Path(args.points) if args.points else None)
     h = table.header
     if meas.ok:
         print(
@@ -141,6 +295,13 @@ def cmd_check(args: argparse.Namespace) -> int:
             f"checksums, travel and limits hold"
         )
         print(f"  max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}")
+        if meas.pulses is not None:
+            pc = meas.pulses
+            print(
+                f"  pulses: {pc.n_work} work + {pc.n_idle} idle, intervals {pc.min_interval_ticks}-"
+                f"{pc.max_interval_ticks} ticks, all in the window; every point burned once, beam within "
+                f"{pc.max_miss_mm * 1e3:.2g} µm of it"
+            )
         return 0
     shown = meas.violations if args.max_lines <= 0 else meas.violations[: args.max_lines]
     for v in shown:
@@ -274,13 +435,24 @@ def build_parser() -> argparse.ArgumentParser:
         "plan",
         help="plan a program into a tick table",
         description="Parse INPUT, plan its motion on the machine and write the tick table. "
-        "INPUT by extension: .ngc .nc .gcode .tap (G-code).",
+        "INPUT by extension: .ngc .nc .gcode .tap (G-code), .xyz .csv (points for pulsed engraving: one "
+        "'x y z [energy]' per line). On a machine with [laser] mode = \"pulsed\" every point (or every G1 end "
+        "point) is burned by one pulse, the motion passing through it at the pulse.",
     )
-    sp.add_argument("input", help="the job: a G-code program")
+    sp.add_argument("input", help="the job: a G-code program or a point file")
     sp.add_argument("--machine", "-m", required=True, help="machine description (TOML)")
     sp.add_argument("--output", "-o", required=True, help="table file to write (e.g. job.ticks)")
     sp.add_argument("--report", "-r", help="write a JSON report (times, lengths, measured max v/a/j per axis)")
-    sp.add_argument("--planner", default="lookahead", help="velocity planner (default: %(default)s)")
+    sp.add_argument(
+        "--planner",
+        help="velocity planner: lookahead (contours, default); for pulsed point jobs sync (default), seed "
+        "(the source documents' per-block method) or stop-and-go (the old scheme)",
+    )
+    sp.add_argument(
+        "--reorder",
+        action="store_true",
+        help="point jobs: burn the points in serpentine raster order (the report gives the as-given time too)",
+    )
     sp.add_argument(
         "--dialect",
         default="linuxcnc",
@@ -299,6 +471,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("table", help="table file")
     sp.add_argument("--machine", "-m", required=True, help="machine description (TOML)")
     sp.add_argument("--max-lines", type=int, default=100, help="print at most this many violations (0: all)")
+    sp.add_argument(
+        "--points", help="pulsed tables: the point file to check the work pulses against (default: the table's source)"
+    )
     sp.set_defaults(func=cmd_check)
 
     sp = sub.add_parser(

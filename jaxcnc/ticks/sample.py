@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from functools import partial
+from typing import Protocol
 
 import jax
 import jax.numpy as jnp
@@ -65,6 +66,23 @@ def quantize(p_mm: jnp.ndarray, discrete_mm: float) -> tuple[jnp.ndarray, jnp.nd
     return n.astype(jnp.int32), frac.astype(jnp.int32)
 
 
+class Sampler(Protocol):
+    """Anything the table writer can sample: ``n_rows`` and chunks of machine-axis positions."""
+
+    @property
+    def n_rows(self) -> int: ...
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]: ...
+
+
+def machine_axes(program_p: np.ndarray, axis_source: np.ndarray, home: np.ndarray) -> np.ndarray:
+    """Map program x, y, z columns ``(m, 3)`` to machine axes (``axis_source[i] = -1``: stays at home)."""
+    out = np.empty((program_p.shape[0], len(axis_source)))
+    for i, src in enumerate(axis_source):
+        out[:, i] = program_p[:, src] if src >= 0 else home[i]
+    return out
+
+
 class TickSampler:
     """Samples a planned job at its tick rate, chunk by chunk, in machine-axis order."""
 
@@ -102,10 +120,7 @@ class TickSampler:
 
     def machine_positions(self, program_p: np.ndarray) -> np.ndarray:
         """Map program x, y, z columns to the machine's axes (undriven axes stay at home)."""
-        out = np.empty((program_p.shape[0], len(self._src)))
-        for i, src in enumerate(self._src):
-            out[:, i] = program_p[:, src] if src >= 0 else self._home[i]
-        return out
+        return machine_axes(program_p, self._src, self._home)
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         """Yield ``(first_tick, positions_mm)`` chunks covering ticks ``0..n_ticks``."""

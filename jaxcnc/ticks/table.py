@@ -16,9 +16,10 @@ from tqdm.auto import tqdm
 import jaxcnc
 from jaxcnc.geometry.spans import SpanKind
 from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter
+from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
-from jaxcnc.ticks.sample import TickSampler, quantize
+from jaxcnc.ticks.sample import Sampler, TickSampler, quantize
 
 _EVENT_OF = {
     Event.PROGRAM_STOP: EventKind.PROGRAM_STOP,
@@ -77,24 +78,19 @@ def _sha256(path: str) -> str | None:
         return None
 
 
-def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = "lookahead") -> Path:
-    """Sample ``job`` at its tick rate and write the table file at ``path``.
+def write_samples(
+    path: str | Path,
+    machine: MachineConfig,
+    sampler: Sampler,
+    events: np.ndarray,
+    meta: dict,
+    progress: bool | None = None,
+) -> Path:
+    """Write a table file from a sampler's chunks of exact machine-axis positions and the events.
 
     ``progress``: show a progress bar (``None``: only on a terminal).
     """
-    m = job.machine
-    sampler = TickSampler(job)
-    meta = {
-        "machine": m.name,
-        "machine_file": m.source,
-        "machine_sha256": _sha256(m.source),
-        "source": job.program.file,
-        "source_sha256": _sha256(job.program.file),
-        "generator": f"jaxcnc {jaxcnc.__version__}",
-        "planner": planner,
-        "total_time_s": job.plan.total_time_s,
-        "n_blocks": job.program.n_blocks,
-    }
+    m = machine
     with TableWriter(
         path, axes=list(m.axis_names), tick_hz=m.tick_hz, discrete_mm=m.discrete_mm, n_rows=sampler.n_rows, meta=meta
     ) as w:
@@ -111,5 +107,29 @@ def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = No
             w.write(np.asarray(pos), np.asarray(fine))
             bar.update(p.shape[0])
         bar.close()
-        w.events = job_events(job)
+        w.events = events
     return Path(path)
+
+
+def table_meta(machine: MachineConfig, source: str, planner: str, total_time_s: float, **more) -> dict:
+    """The header metadata every table carries: machine, source (with checksums), generator."""
+    return {
+        "machine": machine.name,
+        "machine_file": machine.source,
+        "machine_sha256": _sha256(machine.source),
+        "source": source,
+        "source_sha256": _sha256(source),
+        "generator": f"jaxcnc {jaxcnc.__version__}",
+        "planner": planner,
+        "total_time_s": total_time_s,
+        **more,
+    }
+
+
+def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = "lookahead") -> Path:
+    """Sample ``job`` at its tick rate and write the table file at ``path``.
+
+    ``progress``: show a progress bar (``None``: only on a terminal).
+    """
+    meta = table_meta(job.machine, job.program.file, planner, job.plan.total_time_s, n_blocks=job.program.n_blocks)
+    return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress)

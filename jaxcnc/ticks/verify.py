@@ -11,6 +11,7 @@ plan: the table and the machine file are the only inputs.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -30,13 +31,15 @@ class Violation:
     first_tick: int
     last_tick: int
     axis: str
-    quantity: str  # "v", "a", "j", "pos", or "table"
+    quantity: str  # "v", "a", "j", "pos", "table" or "pulse" (the last two: ``axis`` holds the text)
     value: float  # the worst value in the run
     limit: float
 
     def __str__(self) -> str:
         if self.quantity == "table":
             return f"table: {self.axis}"
+        if self.quantity == "pulse":
+            return f"tick {self.first_tick}: {self.axis}"
         span = f"tick {self.first_tick}" + (f" (to {self.last_tick})" if self.last_tick != self.first_tick else "")
         name = {"v": "|v|", "a": "|a|", "j": "|j|", "pos": "position"}[self.quantity]
         rel = ">" if self.quantity != "pos" or self.value > self.limit else "<"
@@ -57,6 +60,7 @@ class Measurement:
     max_pos: dict[str, float] = field(default_factory=dict)
     violations: list[Violation] = field(default_factory=list)
     n_rows: int = 0
+    pulses: Any = None  # a pulsed table's PulseCheck (jaxcnc.ticks.verify_pulses), when checked
 
     @property
     def ok(self) -> bool:

@@ -1,0 +1,138 @@
+"""Pulse-synchronised planning for point-by-point pulsed lasers (in-glass engraving).
+
+Every point is burned by exactly one laser pulse, at whose tick the beam is on the point; every
+interval between consecutive pulses lies in the lamp's window (:mod:`.windows`); idle pulses keep
+the lamp in its window where the motion needs longer. Three planners share one interface
+(:class:`~.request.PulseRequest` → :class:`~.request.PulsePlan`):
+
+- ``stop-and-go`` — the old scheme: rest at every point, wait for the free-running pulse;
+- ``seed`` — the source documents' per-block look-ahead adjusted to pulse windows;
+- ``sync`` (default) — the whole job at once: one spline through the points at pulse instants.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from jaxcnc.errors import SourceError
+from jaxcnc.io.points import PointJob
+from jaxcnc.machine import MachineConfig
+from jaxcnc.planners.job import program_start
+from jaxcnc.planners.limits import NUMERIC_MARGIN
+from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (register the planners)
+from jaxcnc.planners.pulsed.request import (
+    PulsePlan,
+    PulseRequest,
+    get_pulse_planner,
+    pulse_planner_names,
+    register_pulse_planner,
+)
+from jaxcnc.planners.pulsed.windows import PulseWindow, pulse_window
+from jaxcnc.program import PROGRAM_AXES
+
+DEFAULT_PULSE_PLANNER = "sync"
+
+__all__ = [
+    "DEFAULT_PULSE_PLANNER",
+    "PlannedPoints",
+    "PulsePlan",
+    "PulseRequest",
+    "PulseWindow",
+    "get_pulse_planner",
+    "plan_points",
+    "pulse_planner_names",
+    "pulse_request",
+    "pulse_window",
+    "register_pulse_planner",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedPoints:
+    """A planned point job: the points (burn order), the plan, the machine, what it cost."""
+
+    job: PointJob
+    plan: PulsePlan
+    machine: MachineConfig
+    window: PulseWindow
+    plan_wall_s: float
+
+    @property
+    def lower_bound_s(self) -> float:
+        """Intervals between work pulses × the shortest period the lamp allows."""
+        return (len(self.job) - 1) * self.window.shortest_period_s
+
+
+def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
+    """Check ``job`` against ``machine`` (axes, travel) and build the planners' request."""
+    pts = job.points
+    names = machine.axis_names
+    lim = machine.limits(PROGRAM_AXES)
+    home = program_start(machine)
+    for col, axis in enumerate(PROGRAM_AXES):
+        if axis not in names:
+            moved = np.flatnonzero(pts[:, col] != home[col])
+            if moved.size:
+                k = int(moved[0])
+                raise SourceError(
+                    job.file, int(job.line[k]), 0, f"the point needs axis {axis.upper()}, which {machine.name!r} lacks"
+                )
+            continue
+        ax = machine.axis(axis)
+        out = np.flatnonzero((pts[:, col] < ax.min) | (pts[:, col] > ax.max))
+        if out.size:
+            k = int(out[0])
+            raise SourceError(
+                job.file,
+                int(job.line[k]),
+                0,
+                f"{axis.upper()} {pts[k, col]:g} mm is outside the travel of machine {machine.name!r} "
+                f"[{ax.min:g}, {ax.max:g}]",
+            )
+    keep = 1.0 - NUMERIC_MARGIN
+
+    def lim_of(key: str) -> np.ndarray:
+        v = lim[key]
+        return np.where(np.isnan(v), np.inf, v) * keep
+
+    return PulseRequest(
+        points=pts,
+        home=home,
+        window=pulse_window(machine),
+        v_max=lim_of("v_max"),
+        a_max=lim_of("a_max"),
+        j_max=lim_of("j_max"),
+        feed_mm_s=machine.path.feed * keep,
+        rapid_mm_s=machine.path.rapid * keep,
+        line=job.line,
+        file=job.file,
+    )
+
+
+def plan_points(job: PointJob, machine: MachineConfig, planner: str = DEFAULT_PULSE_PLANNER) -> PlannedPoints:
+    """Plan a point job on a pulsed machine with the named pulse planner."""
+    t0 = time.perf_counter()
+    req = pulse_request(job, machine)
+    plan = get_pulse_planner(planner)(req)
+    _check_travel(plan, machine, job)
+    return PlannedPoints(job=job, plan=plan, machine=machine, window=req.window, plan_wall_s=time.perf_counter() - t0)
+
+
+def _check_travel(plan: PulsePlan, machine: MachineConfig, job: PointJob) -> None:
+    lo, hi = plan.trajectory.extents()
+    for col, axis in enumerate(PROGRAM_AXES):
+        if axis not in machine.axis_names:
+            continue
+        ax = machine.axis(axis)
+        if lo[col] < ax.min - 1e-9 or hi[col] > ax.max + 1e-9:
+            value = lo[col] if lo[col] < ax.min else hi[col]
+            raise SourceError(
+                job.file,
+                0,
+                0,
+                f"passing through the points, {axis.upper()} swings to {value:.6g} mm, outside the travel "
+                f"[{ax.min:g}, {ax.max:g}] of machine {machine.name!r}; move the job away from the edge",
+            )

@@ -1,0 +1,119 @@
+"""What a pulse planner is asked (:class:`PulseRequest`), what it answers (:class:`PulsePlan`), by name.
+
+A pulse planner is a callable ``(PulseRequest) -> PulsePlan`` registered with
+:func:`register_pulse_planner`; ``jaxcnc plan --planner NAME`` chooses it for point jobs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from jaxcnc.errors import PlanningError
+from jaxcnc.planners.pulsed.trajectory import Trajectory
+from jaxcnc.planners.pulsed.windows import PulseWindow
+
+
+@dataclass(frozen=True, eq=False)
+class PulseRequest:
+    """Points to burn in order, from a start position, on a machine's limits.
+
+    Attributes:
+        points: ``(n, 3)`` mm, in burn order.
+        home: ``(3,)`` where the machine stands at the start (at rest).
+        window: the lamp's admissible pulse intervals.
+        v_max, a_max, j_max: ``(3,)`` per-axis limits of x, y, z (``inf`` where absent or unset),
+            already reduced by the planners' numeric margin.
+        feed_mm_s: cap on the path speed between points.
+        rapid_mm_s: cap on the path speed of the approach from ``home``.
+        line: ``(n,)`` source line of each point, for error messages.
+        file: the source.
+    """
+
+    points: np.ndarray
+    home: np.ndarray
+    window: PulseWindow
+    v_max: np.ndarray
+    a_max: np.ndarray
+    j_max: np.ndarray
+    feed_mm_s: float
+    rapid_mm_s: float
+    line: np.ndarray
+    file: str
+
+    @property
+    def tick_hz(self) -> float:
+        return self.window.tick_hz
+
+    def straight(self, d: np.ndarray, cap_mm_s: float | np.ndarray) -> tuple[np.ndarray, ...]:
+        """Unit directions, lengths and path limits of straight moves by ``d`` ``(k, 3)``.
+
+        Along a unit direction ``u`` axis ``i`` sees ``v u_i`` and ``a u_i``, so the path
+        speed and acceleration may be ``min_i v_max_i/|u_i|`` and ``min_i a_max_i/|u_i|``.
+        Returns ``(u (k,3), length (k,), v_path (k,), a_path (k,))``.
+        """
+        length = np.linalg.norm(d, axis=1)
+        u = d / np.where(length > 0, length, 1.0)[:, None]
+        au = np.abs(u)
+        with np.errstate(divide="ignore"):
+            v_path = np.min(np.where(au > 0, self.v_max / au, np.inf), axis=1)
+            a_path = np.min(np.where(au > 0, self.a_max / au, np.inf), axis=1)
+        v_path = np.minimum(v_path, cap_mm_s)
+        a_path = np.where(np.isfinite(a_path), a_path, np.max(self.a_max[np.isfinite(self.a_max)], initial=1.0))
+        return u, length, v_path, a_path
+
+
+@dataclass(frozen=True, eq=False)
+class PulsePlan:
+    """A planned pulsed job: the motion and the pulses.
+
+    Attributes:
+        trajectory: the motion, in time.
+        work_tick: ``(n,)`` int64, the tick of the pulse that burns point ``i`` (burn order).
+        idle_tick: ``(k,)`` int64, ticks of pulses that burn nothing, sorted.
+        planner: the planner's name.
+        stats: planner-specific figures (iterations, window violations, ...).
+    """
+
+    trajectory: Trajectory
+    work_tick: np.ndarray
+    idle_tick: np.ndarray
+    planner: str
+    stats: dict
+
+    @property
+    def burn_time_s(self) -> float:
+        """Time from the first work pulse to the last: what the planners are compared on."""
+        return float(self.work_tick[-1] - self.work_tick[0]) / self.trajectory.tick_hz
+
+    @property
+    def n_pulses(self) -> int:
+        return int(self.work_tick.shape[0] + self.idle_tick.shape[0])
+
+
+PulsePlanner = Callable[[PulseRequest], PulsePlan]
+_PULSE_PLANNERS: dict[str, PulsePlanner] = {}
+
+
+def register_pulse_planner(name: str) -> Callable[[PulsePlanner], PulsePlanner]:
+    """Decorator: make a pulse planner available under ``name``."""
+
+    def deco(fn: PulsePlanner) -> PulsePlanner:
+        _PULSE_PLANNERS[name] = fn
+        return fn
+
+    return deco
+
+
+def get_pulse_planner(name: str) -> PulsePlanner:
+    try:
+        return _PULSE_PLANNERS[name]
+    except KeyError:
+        known = ", ".join(sorted(_PULSE_PLANNERS))
+        raise PlanningError(f"unknown pulse planner {name!r}; known: {known}") from None
+
+
+def pulse_planner_names() -> list[str]:
+    return sorted(_PULSE_PLANNERS)

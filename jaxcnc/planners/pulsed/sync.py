@@ -1,0 +1,157 @@
+"""``sync`` (the default): the whole job planned at once, every point burned in motion on a pulse.
+
+Unknowns: the number of ticks ``d_i`` between the pulses that burn points ``i`` and ``i+1``.
+Given them, the motion is the C² spline through the points at their pulse instants
+(:mod:`~jaxcnc.planners.pulsed.spline`, one tridiagonal solve for the whole job) — the beam is on
+each point exactly at its pulse and never stops there. Each ``d_i`` must be admissible
+(``m n_min <= d_i <= m n_max`` for ``m - 1`` idle pulses, :mod:`~jaxcnc.planners.pulsed.windows`).
+
+The iteration starts from the shortest admissible times (one period per point, or the time the
+feed needs) and stretches only where a limit is exceeded. Slowing an interval by a factor ``λ``
+divides its velocities by ``λ``, accelerations by ``λ²``, jerks by ``λ³``; so each interval takes
+
+    λ_i = max( |v|/v_max, sqrt(|a|/a_max), cbrt(|j|/j_max), |v_path|/feed )   (exact maxima)
+
+and, where ``λ_i > 1``, ``d_i ← snap_up(ceil(λ_i d_i))``. Lengthening never shortens another
+interval, so the durations only grow and the loop ends when every limit holds: a fixed point
+reached in a handful of whole-job passes (``lax.while_loop``, one compiled program per size
+bucket). Around the approach from the start position and the stop after the last point the
+times are free (no pulses there).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.errors import PlanningError, SourceError
+from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
+from jaxcnc.planners.pulsed.spline import cubic_coefficients, interval_extremes, spline_moments
+from jaxcnc.planners.pulsed.trajectory import Trajectory
+from jaxcnc.planners.trapezoid import bucket_size
+
+#: Stretch a little beyond the measured factor so the loop does not creep up one tick at a time.
+OVERSHOOT = 1.002
+MAX_ITERATIONS = 200
+
+
+def _snap_up(n, n_min, n_max, idle):
+    n = jnp.maximum(n, 1)
+    m = jnp.where(idle, -(-n // n_max), 1)
+    return jnp.maximum(n, m * n_min), m
+
+
+def _stretch_factor(t_s, y, n_knots, caps, v_max, a_max, j_max):
+    M = spline_moments(t_s, y, n_knots)
+    c = cubic_coefficients(t_s, y, M)
+    ext = interval_extremes(t_s, c, M)
+    lam_v = jnp.max(ext["v"] / v_max, axis=1)
+    lam_a = jnp.sqrt(jnp.max(ext["a"] / a_max, axis=1))
+    lam_j = jnp.cbrt(jnp.max(ext["j"] / j_max, axis=1))
+    lam_p = jnp.linalg.norm(ext["v"], axis=1) / caps  # bounds the path speed from above
+    return jnp.maximum(jnp.maximum(lam_v, lam_a), jnp.maximum(lam_j, lam_p)), M, c
+
+
+@partial(jax.jit, static_argnames=("max_iter",))
+def solve_durations(
+    d0, y, n_knots, gap, caps, v_max, a_max, j_max, n_min, n_max, idle, tick_hz, max_iter=MAX_ITERATIONS
+):
+    """Stretch the interval lengths ``d0`` ``(m-1,)`` ticks until the spline keeps every limit.
+
+    ``gap`` ``(m-1,)`` marks intervals between two work pulses (snapped to the pulse windows);
+    the others (approach, stop, padding) take any whole number of ticks. Returns
+    ``(d, periods, M, coeffs, iterations, worst λ)``.
+    """
+    real = jnp.arange(d0.shape[0]) < n_knots - 1
+
+    def times(d):
+        return jnp.concatenate([jnp.zeros(1), jnp.cumsum(d)]).astype(jnp.float64) / tick_hz
+
+    def body(state):
+        d, _, it, _ = state
+        lam, _, _ = _stretch_factor(times(d), y, n_knots, caps, v_max, a_max, j_max)
+        lam = jnp.where(real, lam, 0.0)
+        grow = lam > 1.0
+        want = jnp.ceil(d * lam * OVERSHOOT).astype(jnp.int64)
+        snapped, m = _snap_up(want, n_min, n_max, idle)
+        d_new = jnp.where(grow, jnp.where(gap, snapped, want), d)
+        m_old = jnp.where(gap, _snap_up(d, n_min, n_max, idle)[1], 1)
+        return d_new, jnp.where(grow & gap, m, m_old), it + 1, jnp.max(lam)
+
+    def cond(state):
+        _, _, it, worst = state
+        return (worst > 1.0) & (it < max_iter)
+
+    m0 = jnp.where(gap, _snap_up(d0, n_min, n_max, idle)[1], 1)
+    d, m, it, _ = jax.lax.while_loop(cond, body, (d0, m0, jnp.int64(0), jnp.float64(jnp.inf)))
+    lam, M, c = _stretch_factor(times(d), y, n_knots, caps, v_max, a_max, j_max)
+    return d, m, M, c, it, jnp.max(jnp.where(real, lam, 0.0))
+
+
+@register_pulse_planner("sync")
+def plan_sync(req: PulseRequest) -> PulsePlan:
+    """Plan the whole job as one spline through the points on admissible pulse instants."""
+    w, f = req.window, req.tick_hz
+    pts = req.points
+    n = len(pts)
+    # knots: start position, the points, the stop (the last point again, at rest)
+    y = np.vstack([req.home[None], pts, pts[-1:]])
+    k = y.shape[0]
+    size = bucket_size(k)
+    y_pad = np.vstack([y, np.repeat(y[-1:], size - k, axis=0)])
+    dist = np.linalg.norm(np.diff(y_pad, axis=0), axis=1)
+    gap = np.zeros(size - 1, bool)
+    gap[1:n] = True  # interval i (knot i -> i+1) lies between work pulses for i = 1..n-1
+    caps = np.where(np.arange(size - 1) == 0, req.rapid_mm_s, req.feed_mm_s)
+    # start from what the speed cap allows, one period at least between pulses
+    a_min = float(np.min(req.a_max))
+    d0 = np.ceil(dist / caps * f).astype(np.int64)
+    d0[0] = max(d0[0], int(np.ceil(np.sqrt(6.0 * dist[0] / a_min) * f)))
+    d0 = np.where(gap, w.snap_up(d0)[0], np.maximum(d0, w.n_min))
+    d, m, _M, coeffs, iters, worst = solve_durations(
+        jnp.asarray(d0),
+        jnp.asarray(y_pad),
+        jnp.int64(k),
+        jnp.asarray(gap),
+        jnp.asarray(caps),
+        jnp.asarray(req.v_max),
+        jnp.asarray(req.a_max),
+        jnp.asarray(req.j_max),
+        jnp.int64(w.n_min),
+        jnp.int64(w.n_max),
+        jnp.bool_(w.idle_pulses),
+        jnp.float64(f),
+    )
+    d, m, coeffs = (np.asarray(a) for a in jax.device_get((d, m, coeffs)))
+    if float(worst) > 1.0:
+        raise PlanningError(
+            f"{req.file}: the pulse-synchronised plan did not settle in {int(iters)} passes (worst limit factor "
+            f"{float(worst):.4f}); please report this job"
+        )
+    d, m, coeffs = d[: k - 1], m[: k - 1], coeffs[: k - 1]
+    too_long = np.flatnonzero(gap[: k - 1] & (d > m * w.n_max))
+    if too_long.size:
+        i = int(too_long[0])  # interval from point i-1 to point i
+        raise SourceError(
+            req.file,
+            int(req.line[i]),
+            0,
+            f"the axes need {d[i] / f * 1e3:.2f} ms to reach this point from the previous one, but without idle "
+            f"pulses the lamp allows at most {w.n_max / f * 1e3:.2f} ms between pulses "
+            f"({w.pulse_hz:g} Hz, tolerance {w.tolerance:g}); set idle_pulses = true or lower pulse_hz",
+        )
+    knot = np.concatenate([[0], np.cumsum(d)])
+    work = knot[1 : n + 1]
+    idle = w.split(work[:-1], np.diff(work), m[1:n])
+    traj = Trajectory(start_tick=knot[:-1].astype(np.float64), coeffs=coeffs, n_ticks=int(knot[-1]), tick_hz=f)
+    return PulsePlan(
+        trajectory=traj,
+        work_tick=work,
+        idle_tick=idle,
+        planner="sync",
+        stats={"iterations": int(iters), "idle_pulses": int(idle.shape[0])},
+    )
