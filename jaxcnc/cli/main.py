@@ -419,6 +419,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
     if args.suite in ("all", "player"):
         run_player_benchmarks(seconds=args.seconds)
+    if args.suite in ("all", "pulsed"):
+        from jaxcnc.bench_pulsed import run_pulsed_benchmarks
+
+        run_pulsed_benchmarks(programs=args.programs, check=args.check)
     return 0
 
 
@@ -532,17 +536,25 @@ def build_parser() -> argparse.ArgumentParser:
         help="benchmarks: planning and tick throughput against baselines",
         description="plan: a synthetic program of 50-150 um line blocks; blocks/s and ticks/s, the look-ahead "
         "against sequential Python and NumPy. geometry: NURBS evaluation against scipy and geomdl, tick "
-        "generation on curves. Peers run in the same process; JIT compile time is reported apart.",
+        "generation on curves. player: table playback into sim and the TCP receiver. pulsed: the documents' "
+        "14 engraving programs under stop-and-go, the documents' method and jaxcnc's. Peers run in the same "
+        "process; JIT compile time is reported apart.",
     )
     sp.add_argument("--blocks", type=int, default=100_000, help="synthetic program size (default: %(default)s)")
     sp.add_argument("--repeats", type=int, default=5, help="steady-state repetitions (default: %(default)s)")
     sp.add_argument("--points", type=int, default=1_000_000, help="NURBS evaluation points (default: %(default)s)")
     sp.add_argument("--seconds", type=float, default=60.0, help="player: table length in s (default: %(default)s)")
     sp.add_argument(
+        "--programs", type=int, nargs="+", help="pulsed: run only these of the documents' 14 programs (1-14)"
+    )
+    sp.add_argument(
+        "--check", action="store_true", help="pulsed: also write every table and verify limits, windows and hits"
+    )
+    sp.add_argument(
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "geometry", "player"),
+        choices=("all", "plan", "geometry", "player", "pulsed"),
         help="which benchmarks (default: %(default)s)",
     )
     sp.set_defaults(func=cmd_bench)

@@ -1,15 +1,25 @@
 """Interpolating cubic splines in time through points at given instants, and their exact extremes.
 
-Each axis is the C² cubic through ``(t_i, y_i)`` with the machine at rest at both ends. In the
-moment form (``M_i`` = acceleration at knot ``i``, ``h_i = t_{i+1} - t_i``, ``Δ_i = (y_{i+1}-y_i)/h_i``):
+Each axis is the C² cubic through ``(t_i, y_i)``. In the moment form (``M_i`` = acceleration at
+knot ``i``, ``h_i = t_{i+1} - t_i``, ``Δ_i = (y_{i+1}-y_i)/h_i``) the interior knots satisfy
 
-    interior:  h_{i-1} M_{i-1} + 2 (h_{i-1} + h_i) M_i + h_i M_{i+1} = 6 (Δ_i - Δ_{i-1})
-    at rest:   2 h_0 M_0 + h_0 M_1 = 6 Δ_0            h_{n-1} M_{n-1} + 2 h_{n-1} M_n = -6 Δ_{n-1}
+    h_{i-1} M_{i-1} + 2 (h_{i-1} + h_i) M_i + h_i M_{i+1} = 6 (Δ_i - Δ_{i-1}).
 
-a strictly diagonally dominant tridiagonal system (one ``tridiagonal_solve``, O(n), every axis at
-once). Among all C² interpolants it has the least ``∫ a² dt``. Acceleration is linear on each
-interval, so its extremes are the knot values ``M_i``; jerk is the constant ``(M_{i+1}-M_i)/h_i``;
-velocity is quadratic, with its extreme at an end or at the vertex — all exact, no sampling.
+The motion starts and ends at rest *with zero acceleration* (no acceleration step, so a jerk limit
+can hold at the first and last tick): four end conditions where a cubic spline has two. As in
+Biagiotti & Melchiorri (Trajectory Planning for Automatic Machines and Robots, §4.4), two extra
+knots with free positions carry them: knot 1 between the start ``y_0`` and the first point, knot
+``L-1`` between the last point and the stop ``y_L``. ``M_0 = 0`` and ``v(t_0) = 0`` give
+``y_1 = y_0 + h_0² M_1 / 6``; substituting keeps the system tridiagonal:
+
+    row 1:    (2(h_0+h_1) + h_0²/h_1 + h_0) M_1 + h_1 M_2 = 6 (y_2 - y_0)/h_1
+    row 2:    (h_1 - h_0²/h_1) M_1 + 2(h_1+h_2) M_2 + h_2 M_3 = 6 (Δ_2 - (y_2 - y_0)/h_1)
+
+(and the mirror image at the end) — the usual rows with ``y_1`` read as ``y_0``, plus those
+corrections. One ``tridiagonal_solve`` for the whole job, every axis at once. Acceleration is
+linear on each interval, so its extremes are the knot values ``M_i``; jerk is the constant
+``(M_{i+1}-M_i)/h_i``; velocity is quadratic, with its extreme at an end or at the vertex — all
+exact, no sampling.
 """
 
 from __future__ import annotations
@@ -20,32 +30,51 @@ import jax.numpy as jnp
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 
 
-def spline_moments(t_s: jnp.ndarray, y: jnp.ndarray, n_knots: jnp.ndarray) -> jnp.ndarray:
-    """Knot accelerations ``M`` ``(m, d)`` of the rest-to-rest spline through ``y`` ``(m, d)`` at ``t_s`` ``(m,)``.
+def spline_moments(t_s: jnp.ndarray, y: jnp.ndarray, n_knots: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Moments and knot positions of the rest-to-rest spline with free knots 1 and ``L-1``.
 
-    Only knots ``0..n_knots-1`` are used; rows beyond (padding to a bucket) get ``M = 0`` and do
-    not couple to the rest.
+    Args:
+        t_s: ``(m,)`` knot times, increasing over the first ``n_knots``.
+        y: ``(m, d)`` knot positions; rows 1 and ``L = n_knots - 1`` minus 1 are placeholders.
+        n_knots: knots in use (at least 5); rows beyond are padding (``M = 0``, uncoupled).
+    Returns:
+        ``(M, y)``: accelerations ``(m, d)`` at the knots and the positions with the two free
+        knots filled in.
     """
     m = t_s.shape[0]
     idx = jnp.arange(m)
     last = n_knots - 1
     h = jnp.diff(t_s)
     h = jnp.where(idx[:-1] < last, h, 1.0)  # padding: any positive value
-    dy = jnp.diff(y, axis=0) / h[:, None]
-    h_prev = jnp.concatenate([jnp.zeros(1), h])  # h_{i-1}, 0 at i = 0
-    h_next = jnp.concatenate([h, jnp.zeros(1)])  # h_i
-    h_next = jnp.where(idx < last, h_next, 0.0)
-    h_prev = jnp.where(idx <= last, h_prev, 0.0)
-    d_prev = jnp.concatenate([jnp.zeros((1, y.shape[1])), dy])
-    d_next = jnp.concatenate([dy, jnp.zeros((1, y.shape[1]))])
-    d_next = jnp.where((idx < last)[:, None], d_next, 0.0)
-    d_prev = jnp.where((idx <= last)[:, None], d_prev, 0.0)
-    pad = idx > last
-    diag = jnp.where(pad, 1.0, 2.0 * (h_prev + h_next))
-    rhs = jnp.where(pad[:, None], 0.0, 6.0 * (d_next - d_prev))
-    dl = jnp.where(pad, 0.0, h_prev)
-    du = jnp.where(pad, 0.0, h_next)
-    return jax.lax.linalg.tridiagonal_solve(dl, diag, du, rhs)
+    # the usual rows, with the free knots read as the rest positions beside them
+    y_eff = jnp.where((idx == 1)[:, None], y[0], y)
+    y_eff = jnp.where((idx == last - 1)[:, None], y[last], y_eff)
+    dy = jnp.diff(y_eff, axis=0) / h[:, None]
+    zero_row = jnp.zeros((1, y.shape[1]))
+    h_prev = jnp.concatenate([jnp.zeros(1), h])
+    h_next = jnp.concatenate([h, jnp.zeros(1)])
+    rhs = 6.0 * (jnp.concatenate([dy, zero_row]) - jnp.concatenate([zero_row, dy]))
+    diag = 2.0 * (h_prev + h_next)
+    dl, du = h_prev, h_next
+    # start: M_0 = 0 and the free knot 1
+    h0, h1 = h[0], h[1]
+    diag = diag + jnp.where(idx == 1, h0 * h0 / h1 + h0, 0.0)
+    dl = jnp.where(idx == 1, 0.0, dl) - jnp.where(idx == 2, h0 * h0 / h1, 0.0)
+    # end: M_L = 0 and the free knot L-1
+    ha, hb = h[last - 1], h[last - 2]
+    diag = diag + jnp.where(idx == last - 1, ha * ha / hb + ha, 0.0)
+    du = jnp.where(idx == last - 1, 0.0, du) - jnp.where(idx == last - 2, ha * ha / hb, 0.0)
+    fixed = (idx == 0) | (idx >= last)  # M = 0: the two rest ends and the padding
+    diag = jnp.where(fixed, 1.0, diag)
+    dl = jnp.where(fixed, 0.0, dl)
+    du = jnp.where(fixed, 0.0, du)
+    rhs = jnp.where(fixed[:, None], 0.0, rhs)
+    M = jax.lax.linalg.tridiagonal_solve(dl, diag, du, rhs)
+    y1 = y[0] + h0 * h0 * M[1] / 6.0
+    y_end = y[last] + ha * ha * M[last - 1] / 6.0
+    y_full = jnp.where((idx == 1)[:, None], y1, y)
+    y_full = jnp.where((idx == last - 1)[:, None], y_end, y_full)
+    return M, y_full
 
 
 def cubic_coefficients(t_s: jnp.ndarray, y: jnp.ndarray, M: jnp.ndarray) -> jnp.ndarray:

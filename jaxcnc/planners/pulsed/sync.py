@@ -46,7 +46,7 @@ def _snap_up(n, n_min, n_max, idle):
 
 
 def _stretch_factor(t_s, y, n_knots, caps, v_max, a_max, j_max):
-    M = spline_moments(t_s, y, n_knots)
+    M, y = spline_moments(t_s, y, n_knots)
     c = cubic_coefficients(t_s, y, M)
     ext = interval_extremes(t_s, c, M)
     lam_v = jnp.max(ext["v"] / v_max, axis=1)
@@ -98,19 +98,21 @@ def plan_sync(req: PulseRequest) -> PulsePlan:
     w, f = req.window, req.tick_hz
     pts = req.points
     n = len(pts)
-    # knots: start position, the points, the stop (the last point again, at rest)
-    y = np.vstack([req.home[None], pts, pts[-1:]])
+    # knots: start, a free knot, the points, a free knot, the stop (the last point, at rest)
+    y = np.vstack([req.home[None], req.home[None], pts, pts[-1:], pts[-1:]])
     k = y.shape[0]
     size = bucket_size(k)
     y_pad = np.vstack([y, np.repeat(y[-1:], size - k, axis=0)])
     dist = np.linalg.norm(np.diff(y_pad, axis=0), axis=1)
     gap = np.zeros(size - 1, bool)
-    gap[1:n] = True  # interval i (knot i -> i+1) lies between work pulses for i = 1..n-1
-    caps = np.where(np.arange(size - 1) == 0, req.rapid_mm_s, req.feed_mm_s)
-    # start from what the speed cap allows, one period at least between pulses
+    gap[2 : n + 1] = True  # interval i (knot i -> i+1) lies between work pulses for i = 2..n
+    caps = np.where(np.arange(size - 1) < 2, req.rapid_mm_s, req.feed_mm_s)
+    # start from what the speed cap allows, one period at least between pulses; the approach
+    # (two intervals) from a rest-to-rest cubic's time sqrt(6 D / a)
     a_min = float(np.min(req.a_max))
     d0 = np.ceil(dist / caps * f).astype(np.int64)
-    d0[0] = max(d0[0], int(np.ceil(np.sqrt(6.0 * dist[0] / a_min) * f)))
+    approach = float(np.linalg.norm(pts[0] - req.home))
+    d0[:2] = int(np.ceil(max(np.sqrt(6.0 * approach / a_min), 1.5 * approach / req.rapid_mm_s) * f / 2))
     d0 = np.where(gap, w.snap_up(d0)[0], np.maximum(d0, w.n_min))
     d, m, _M, coeffs, iters, worst = solve_durations(
         jnp.asarray(d0),
@@ -133,20 +135,20 @@ def plan_sync(req: PulseRequest) -> PulsePlan:
             f"{float(worst):.4f}); please report this job"
         )
     d, m, coeffs = d[: k - 1], m[: k - 1], coeffs[: k - 1]
-    too_long = np.flatnonzero(gap[: k - 1] & (d > m * w.n_max))
-    if too_long.size:
-        i = int(too_long[0])  # interval from point i-1 to point i
+    too_long = gap[: k - 1] & (d > m * w.n_max)
+    if np.any(too_long):
+        i = int(np.argmax(np.where(too_long, d, 0)))  # the longest: interval from point i-2 to point i-1
         raise SourceError(
             req.file,
-            int(req.line[i]),
+            int(req.line[i - 1]),
             0,
             f"the axes need {d[i] / f * 1e3:.2f} ms to reach this point from the previous one, but without idle "
             f"pulses the lamp allows at most {w.n_max / f * 1e3:.2f} ms between pulses "
             f"({w.pulse_hz:g} Hz, tolerance {w.tolerance:g}); set idle_pulses = true or lower pulse_hz",
         )
     knot = np.concatenate([[0], np.cumsum(d)])
-    work = knot[1 : n + 1]
-    idle = w.split(work[:-1], np.diff(work), m[1:n])
+    work = knot[2 : n + 2]
+    idle = w.split(work[:-1], np.diff(work), m[2 : n + 1])
     traj = Trajectory(start_tick=knot[:-1].astype(np.float64), coeffs=coeffs, n_ticks=int(knot[-1]), tick_hz=f)
     return PulsePlan(
         trajectory=traj,
