@@ -19,6 +19,7 @@ from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
+from jaxcnc.ticks.pso import pso_events
 from jaxcnc.ticks.sample import Sampler, TickSampler, quantize
 
 _EVENT_OF = {
@@ -53,7 +54,7 @@ def job_events(job: PlannedJob) -> np.ndarray:
     lit = (
         (prog.laser[rows] != LaserMode.OFF)
         & ~prog.rapid[rows]
-        & ((kind == Kind.LINE) | (kind == Kind.ARC) | (kind == Kind.DWELL))
+        & ((kind == Kind.LINE) | (kind == Kind.ARC) | (kind == Kind.CURVE) | (kind == Kind.DWELL))
     )
     power = np.where(lit, prog.power[rows], 0.0)
     mode = np.where(lit, prog.laser[rows], 0)
@@ -67,6 +68,11 @@ def job_events(job: PlannedJob) -> np.ndarray:
     for code, ek in _EVENT_OF.items():
         sel = ev[prog.event[rows[ev]] == code]
         add(tick[sel], ek, prog.event_value[rows[sel]], 0.0, seg=sel)
+    if job.machine.laser.mode == "pso":
+        moving = lit & (spans.kind != SpanKind.POINT)
+        pso = pso_events(plan, moving, job.machine.laser.pso_mm)
+        parts.append(pso)
+        order.append(np.full(pso.shape[0], len(rows) * 8 + EventKind.PSO_PULSE))
     out = np.concatenate(parts)
     return out[np.lexsort((np.concatenate(order), out["tick"]))]
 
