@@ -143,9 +143,8 @@ def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False
         f"algorithm: {100 * doc.min():.1f}-{100 * doc.max():.1f} % (mean {100 * doc.mean():.1f} %)"
     )
     if cold and 4 in chosen:
-        print(
-            f"planning program 4 (108,400 points) with sync in a fresh process, no compile cache: {_plan_wall_cold(n_points=108_400):.2f} s"
-        )
+        cold_s = _plan_wall_cold(n_points=108_400)
+        print(f"planning program 4 (108,400 points) with sync in a fresh process, no compile cache: {cold_s:.2f} s")
     return rows
 
 
