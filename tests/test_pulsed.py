@@ -377,3 +377,15 @@ def test_reorder_is_refused_for_contours(tmp_path, capsys):
     assert main(["plan", str(prog), "-m", str(EXAMPLE_MACHINE), "-o", str(tmp_path / "o"), "--reorder"]) == 2
     assert isinstance(JaxcncError("x"), Exception)
     assert "--reorder applies to point-by-point jobs" in capsys.readouterr().err
+
+
+def test_cli_gcode_on_a_pulsed_machine_burns_the_g1_end_points(glass_toml, tmp_path):
+    prog = tmp_path / "dots.ngc"
+    lines = ["G21 G90", "G0 X50 Y50 Z20"] + [f"G1 X{50 + 0.125 * (i + 1):.3f} F1800" for i in range(40)] + ["M2"]
+    prog.write_text("\n".join(lines) + "\n")
+    rep = tmp_path / "r.json"
+    out = tmp_path / "dots.ticks"
+    assert main(["plan", str(prog), "-m", str(glass_toml), "-o", str(out), "-r", str(rep), "-q"]) == 0
+    r = json.loads(rep.read_text())
+    assert r["n_points"] == 40 and r["violations"] == []
+    assert main(["check", str(out), "-m", str(glass_toml)]) == 0
