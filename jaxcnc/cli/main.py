@@ -329,8 +329,17 @@ def cmd_play(args: argparse.Namespace) -> int:
         bar.update(done - last[0])
         last[0] = done
 
+    a_max = None
+    if args.machine:
+        from jaxcnc.machine import load_machine
+
+        machine = load_machine(args.machine)
+        missing = [a for a in table.axes if a not in machine.axis_names]
+        if missing:
+            raise JaxcncError(f"{args.machine}: machine {machine.name!r} lacks the table's axes {missing}")
+        a_max = np.array([machine.axis(a).a_max for a in table.axes])
     try:
-        result = play(table, sink, progress=progress)
+        result = play(table, sink, progress=progress, a_max=a_max, stop_on_sigint=a_max is not None)
     except ConnectionError as exc:
         bar.close()
         raise JaxcncError(f"{args.sink}: {exc}") from None
@@ -343,6 +352,12 @@ def cmd_play(args: argparse.Namespace) -> int:
         )
         if args.record:
             print(f"  recorded drive positions -> {args.record}")
+    if result.stopped:
+        print(
+            f"jaxcnc: stopped: controlled stop, the drives came to rest on the path at tick {result.executed_tick}",
+            file=sys.stderr,
+        )
+        return 130
     return 0 if result.executed_tick + 1 == table.n_rows else 1
 
 
@@ -495,6 +510,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sp.add_argument("--record", help="sim: save the executed drive positions to this .npy file")
     sp.add_argument("--realtime", action="store_true", help="sim: run the virtual clock in wall-clock time")
+    sp.add_argument(
+        "--machine",
+        "-m",
+        help="machine file: with it, Ctrl-C makes a controlled stop (ramp down along the path within the "
+        "acceleration limits, exit status 130) instead of letting the buffer run out",
+    )
     sp.add_argument("--quiet", "-q", action="store_true")
     sp.set_defaults(func=cmd_play)
 

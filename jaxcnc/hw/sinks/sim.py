@@ -96,7 +96,8 @@ class SimSink:
 
     def close(self) -> None:
         if self.realtime:
-            time.sleep(max(0.0, self._t0 + self.header.n_rows / self.header.tick_hz - time.perf_counter()))
+            due = self._t0 + (self._next_tick + self._queued) / self.header.tick_hz
+            time.sleep(max(0.0, due - time.perf_counter()))
         self._execute(self._queued)
         if self.record_path is not None and self.recorded is not None:
             self.recorded.flush()
