@@ -272,7 +272,7 @@ def check_table(table_path: Path, machine_path: Path, points: Path | None = None
 
 
 def _points_of_table(table, machine, points: Path | None):
-    import hashlib
+    from jaxcnc.hw.tablefile import file_sha256
 
     meta = table.header.meta
     source = Path(points) if points else Path(str(meta.get("source", "")))
@@ -281,7 +281,7 @@ def _points_of_table(table, machine, points: Path | None):
             f"{table.path}: the table burns points from {str(source)!r}, which is not here; pass --points FILE"
         )
     if points is None and meta.get("source_sha256"):
-        if hashlib.sha256(source.read_bytes()).hexdigest() != meta["source_sha256"]:
+        if file_sha256(source) != meta["source_sha256"]:
             raise JaxcncError(f"{source}: changed since the table was planned (checksum differs); pass --points FILE")
     return load_point_job(source, machine)
 

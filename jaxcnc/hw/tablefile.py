@@ -20,6 +20,7 @@ checker measure speed and acceleration at the tick rate from the unquantised pat
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import struct
@@ -134,6 +135,15 @@ class TableHeader:
     @property
     def fine_offset(self) -> int:
         return self.data_offset + self.n_blocks * self.block_bytes
+
+
+def file_sha256(path: str | Path) -> str | None:
+    """SHA-256 (hex) of a file's bytes, as the header's ``source_sha256``/``machine_sha256`` record it;
+    ``None`` when it cannot be read."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def _align(n: int) -> int:

@@ -7,7 +7,6 @@ one ``BLOCK`` per program block at its first tick, ``LASER`` where the beam's po
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,7 @@ from tqdm.auto import tqdm
 
 import jaxcnc
 from jaxcnc.geometry.spans import SpanKind
-from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter
+from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter, file_sha256
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
@@ -77,13 +76,6 @@ def job_events(job: PlannedJob) -> np.ndarray:
     return out[np.lexsort((np.concatenate(order), out["tick"]))]
 
 
-def _sha256(path: str) -> str | None:
-    try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    except OSError:
-        return None
-
-
 def write_samples(
     path: str | Path,
     machine: MachineConfig,
@@ -122,9 +114,9 @@ def table_meta(machine: MachineConfig, source: str, planner: str, total_time_s: 
     return {
         "machine": machine.name,
         "machine_file": machine.source,
-        "machine_sha256": _sha256(machine.source),
+        "machine_sha256": file_sha256(machine.source),
         "source": source,
-        "source_sha256": _sha256(source),
+        "source_sha256": file_sha256(source),
         "generator": f"jaxcnc {jaxcnc.__version__}",
         "planner": planner,
         "total_time_s": total_time_s,
