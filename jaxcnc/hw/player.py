@@ -70,26 +70,32 @@ class Player:
     def request_stop(self) -> None:
         self._stop.set()
 
-    def _send(self, first: int, rows: np.ndarray, events: np.ndarray, progress) -> None:
+    def _send(self, first: int, rows: np.ndarray, events: np.ndarray, progress, stoppable: bool = False) -> int:
+        """Write ``rows`` for ticks ``first ..`` as the sink makes room, with the events among them.
+
+        Returns the rows written: all of them, or with ``stoppable`` those written before a stop
+        was requested (a controlled stop then ramps down from there).
+        """
         done = 0
         while done < rows.shape[0]:
+            if stoppable and self._stop.is_set() and self.a_max is not None:
+                break
             room = self.sink.free_rows()
             if room <= 0:
                 self.sink.wait()
                 if progress:
                     progress(self.sink.executed_tick() + 1)
                 continue
-            n = min(room, self.chunk_rows, rows.shape[0] - done)
+            n = min(room, rows.shape[0] - done)
             lo, hi = np.searchsorted(events["tick"], [first + done, first + done + n])
             self.sink.write(first + done, rows[done : done + n], events[lo:hi])
             done += n
+        return done
 
     def run(self, progress=None) -> PlayResult:
         """Play to the end, or until a stop is requested (then ramp down and stop)."""
         table, sink = self.table, self.sink
         h = table.header
-        events = table.events
-        ev_ticks = events["tick"]
         t0 = time.perf_counter()
         sink.open(h)
         sent = 0
@@ -98,20 +104,11 @@ class Player:
             while sent < h.n_rows:
                 if self._stop.is_set() and self.a_max is not None:
                     ramp = stop_ramp(table, self.a_max, sent)
-                    self._send(sent, ramp, events[:0], progress)  # no events: the program's are not reached
-                    sent += ramp.shape[0]
+                    sent += self._send(sent, ramp, table.events[:0], progress)  # the program's events are not reached
                     stopped = sent < h.n_rows
                     break
-                room = sink.free_rows()
-                if room <= 0:
-                    sink.wait()
-                    if progress:
-                        progress(sink.executed_tick() + 1)
-                    continue
-                n = min(room, self.chunk_rows, h.n_rows - sent)
-                lo, hi = np.searchsorted(ev_ticks, [sent, sent + n])
-                sink.write(sent, table.read_positions(sent, sent + n), events[lo:hi])
-                sent += n
+                n = min(self.chunk_rows, h.n_rows - sent)
+                sent += self._send(sent, table.read_positions(sent, sent + n), table.events, progress, stoppable=True)
         finally:
             sink.close()
         if progress:
