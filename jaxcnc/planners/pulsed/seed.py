@@ -23,6 +23,7 @@ from jaxcnc.errors import SourceError
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.trajectory import Trajectory, move_pieces
+from jaxcnc.planners.pulsed.windows import snap_up_ticks
 
 #: Two block directions closer than this (unit vectors) are collinear: passed without stopping.
 COLLINEAR = 1e-9
@@ -50,8 +51,7 @@ def _seed_scan(length, a, v_cap, v1_max, free, n_min, n_max, idle, tick_hz):
         L, acc, cap, v1m, is_free = blk
         t_fast, _, _ = _block_time(1.0, v0, v1m, cap, L, acc)
         n_fast = jnp.maximum(jnp.ceil(t_fast * tick_hz - 1e-9).astype(jnp.int64), 1)
-        m = jnp.where(idle, -(-n_fast // n_max), 1)
-        n_win = jnp.maximum(n_fast, m * n_min)
+        n_win, m = snap_up_ticks(n_fast, n_min, n_max, idle, jnp)
         n = jnp.where(is_free, n_fast, n_win)
         target = n.astype(jnp.float64) / tick_hz
 

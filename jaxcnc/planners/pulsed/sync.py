@@ -32,17 +32,12 @@ from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.spline import cubic_coefficients, interval_extremes, spline_moments
 from jaxcnc.planners.pulsed.trajectory import Trajectory
+from jaxcnc.planners.pulsed.windows import snap_up_ticks
 from jaxcnc.planners.trapezoid import bucket_size
 
 #: Stretch a little beyond the measured factor so the loop does not creep up one tick at a time.
 OVERSHOOT = 1.002
 MAX_ITERATIONS = 200
-
-
-def _snap_up(n, n_min, n_max, idle):
-    n = jnp.maximum(n, 1)
-    m = jnp.where(idle, -(-n // n_max), 1)
-    return jnp.maximum(n, m * n_min), m
 
 
 def _stretch_factor(t_s, y, n_knots, caps, v_max, a_max, j_max):
@@ -53,7 +48,7 @@ def _stretch_factor(t_s, y, n_knots, caps, v_max, a_max, j_max):
     lam_a = jnp.sqrt(jnp.max(ext["a"] / a_max, axis=1))
     lam_j = jnp.cbrt(jnp.max(ext["j"] / j_max, axis=1))
     lam_p = jnp.linalg.norm(ext["v"], axis=1) / caps  # bounds the path speed from above
-    return jnp.maximum(jnp.maximum(lam_v, lam_a), jnp.maximum(lam_j, lam_p)), M, c
+    return jnp.maximum(jnp.maximum(lam_v, lam_a), jnp.maximum(lam_j, lam_p)), c
 
 
 @partial(jax.jit, static_argnames=("max_iter",))
@@ -64,7 +59,7 @@ def solve_durations(
 
     ``gap`` ``(m-1,)`` marks intervals between two work pulses (snapped to the pulse windows);
     the others (approach, stop, padding) take any whole number of ticks. Returns
-    ``(d, periods, M, coeffs, iterations, worst λ)``.
+    ``(d, periods, coeffs, iterations, worst λ)``; ``periods`` is 1 outside the gaps.
     """
     real = jnp.arange(d0.shape[0]) < n_knots - 1
 
@@ -72,24 +67,22 @@ def solve_durations(
         return jnp.concatenate([jnp.zeros(1), jnp.cumsum(d)]).astype(jnp.float64) / tick_hz
 
     def body(state):
-        d, _, it, _ = state
-        lam, _, _ = _stretch_factor(times(d), y, n_knots, caps, v_max, a_max, j_max)
+        d, it, _ = state
+        lam, _ = _stretch_factor(times(d), y, n_knots, caps, v_max, a_max, j_max)
         lam = jnp.where(real, lam, 0.0)
-        grow = lam > 1.0
         want = jnp.ceil(d * lam * OVERSHOOT).astype(jnp.int64)
-        snapped, m = _snap_up(want, n_min, n_max, idle)
-        d_new = jnp.where(grow, jnp.where(gap, snapped, want), d)
-        m_old = jnp.where(gap, _snap_up(d, n_min, n_max, idle)[1], 1)
-        return d_new, jnp.where(grow & gap, m, m_old), it + 1, jnp.max(lam)
+        snapped, _ = snap_up_ticks(want, n_min, n_max, idle, jnp)
+        d_new = jnp.where(lam > 1.0, jnp.where(gap, snapped, want), d)
+        return d_new, it + 1, jnp.max(lam)
 
     def cond(state):
-        _, _, it, worst = state
+        _, it, worst = state
         return (worst > 1.0) & (it < max_iter)
 
-    m0 = jnp.where(gap, _snap_up(d0, n_min, n_max, idle)[1], 1)
-    d, m, it, _ = jax.lax.while_loop(cond, body, (d0, m0, jnp.int64(0), jnp.float64(jnp.inf)))
-    lam, M, c = _stretch_factor(times(d), y, n_knots, caps, v_max, a_max, j_max)
-    return d, m, M, c, it, jnp.max(jnp.where(real, lam, 0.0))
+    d, it, _ = jax.lax.while_loop(cond, body, (d0, jnp.int64(0), jnp.float64(jnp.inf)))
+    m = jnp.where(gap, snap_up_ticks(d, n_min, n_max, idle, jnp)[1], 1)
+    lam, c = _stretch_factor(times(d), y, n_knots, caps, v_max, a_max, j_max)
+    return d, m, c, it, jnp.max(jnp.where(real, lam, 0.0))
 
 
 @register_pulse_planner("sync")
@@ -114,7 +107,7 @@ def plan_sync(req: PulseRequest) -> PulsePlan:
     approach = float(np.linalg.norm(pts[0] - req.home))
     d0[:2] = int(np.ceil(max(np.sqrt(6.0 * approach / a_min), 1.5 * approach / req.rapid_mm_s) * f / 2))
     d0 = np.where(gap, w.snap_up(d0)[0], np.maximum(d0, w.n_min))
-    d, m, _M, coeffs, iters, worst = solve_durations(
+    d, m, coeffs, iters, worst = solve_durations(
         jnp.asarray(d0),
         jnp.asarray(y_pad),
         jnp.int64(k),

@@ -54,13 +54,10 @@ class PulseWindow:
     def snap_up(self, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Shortest admissible time ``>= n`` ticks between two work pulses, and its period count.
 
-        ``m = ceil(n / n_max)`` is the fewest periods that can last ``n`` ticks; with ``m``
-        periods the time is at least ``m n_min``. Without idle pulses ``m`` is 1 and times above
-        ``n_max`` stay as they are (the caller reports them).
+        See :func:`snap_up_ticks`; without idle pulses times above ``n_max`` stay as they are
+        (the caller reports them).
         """
-        n = np.maximum(np.asarray(n, dtype=np.int64), 1)
-        m = -(-n // self.n_max) if self.idle_pulses else np.ones_like(n)
-        return np.maximum(n, m * self.n_min), m
+        return snap_up_ticks(np.asarray(n, dtype=np.int64), self.n_min, self.n_max, self.idle_pulses)
 
     def admissible(self, n: np.ndarray, m: np.ndarray) -> np.ndarray:
         """Whether ``n`` ticks split into ``m`` admissible intervals."""
@@ -81,6 +78,19 @@ class PulseWindow:
         j = np.arange(total) - np.repeat(np.cumsum(idle) - idle, idle) + 1  # 1..m-1 within its gap
         # j-th pulse after floor(j n / m) ticks: consecutive intervals differ by at most one tick
         return start[gap] + (j * n[gap]) // m[gap]
+
+
+def snap_up_ticks(n, n_min, n_max, idle, xp=np):
+    """``(ticks, periods)``: the shortest admissible time ``>= n`` and its number of periods.
+
+    ``m = ceil(n / n_max)`` is the fewest periods that can last ``n`` ticks; with ``m`` periods
+    the time is at least ``m n_min``. Nothing shorter is admissible, and for an admissible ``n``
+    the result is ``n`` itself with an admissible ``m``. Without idle pulses ``m`` is 1.
+    ``xp`` is the array module (``numpy``, or ``jax.numpy`` inside a compiled loop).
+    """
+    n = xp.maximum(n, 1)
+    m = xp.where(idle, -(-n // n_max), xp.ones_like(n))
+    return xp.maximum(n, m * n_min), m
 
 
 def pulse_window(machine: MachineConfig) -> PulseWindow:
