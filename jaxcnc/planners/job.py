@@ -13,7 +13,7 @@ import numpy as np
 
 from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
-from jaxcnc.machine import MachineConfig
+from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.planners.registry import PlanRequest, get_planner
 from jaxcnc.planners.timelaw import Plan
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
@@ -60,22 +60,36 @@ def _check_axes(program: Program, machine: MachineConfig) -> tuple[int, ...]:
     return tuple(PROGRAM_AXES.index(a) if a in PROGRAM_AXES else -1 for a in names)
 
 
-def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> None:
+def outside_travel(
+    lo: np.ndarray, hi: np.ndarray, machine: MachineConfig, tol_mm: float = 1e-9
+) -> tuple[int, str, float, AxisConfig] | None:
+    """The first row of extents ``lo``/``hi`` ``(n, 3)`` (x, y, z) that leaves the machine's travel.
+
+    Returns ``(row, axis, value, axis_config)`` for the first offending row (axes in x, y, z
+    order), or ``None``; axes the machine lacks are not checked.
+    """
     for col, axis in enumerate(PROGRAM_AXES):
         if axis not in machine.axis_names:
             continue
         ax = machine.axis(axis)
-        bad = np.flatnonzero((spans.lo[:, col] < ax.min - 1e-9) | (spans.hi[:, col] > ax.max + 1e-9))
+        bad = np.flatnonzero((lo[:, col] < ax.min - tol_mm) | (hi[:, col] > ax.max + tol_mm))
         if bad.size:
-            k = bad[0]
-            value = spans.lo[k, col] if spans.lo[k, col] < ax.min else spans.hi[k, col]
-            raise SourceError(
-                program.file,
-                int(program.line[spans.block[k]]),
-                0,
-                f"{axis.upper()} reaches {value:.6g} mm, outside the travel of machine "
-                f"{machine.name!r} [{ax.min:g}, {ax.max:g}]",
-            )
+            k = int(bad[0])
+            return k, axis, float(lo[k, col] if lo[k, col] < ax.min else hi[k, col]), ax
+    return None
+
+
+def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> None:
+    out = outside_travel(spans.lo, spans.hi, machine)
+    if out is not None:
+        k, axis, value, ax = out
+        raise SourceError(
+            program.file,
+            int(program.line[spans.block[k]]),
+            0,
+            f"{axis.upper()} reaches {value:.6g} mm, outside the travel of machine "
+            f"{machine.name!r} [{ax.min:g}, {ax.max:g}]",
+        )
 
 
 def plan_job(program: Program, machine: MachineConfig, planner: str = "lookahead") -> PlannedJob:

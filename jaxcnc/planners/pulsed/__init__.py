@@ -20,7 +20,7 @@ import numpy as np
 from jaxcnc.errors import SourceError
 from jaxcnc.io.points import PointJob
 from jaxcnc.machine import MachineConfig
-from jaxcnc.planners.job import program_start
+from jaxcnc.planners.job import outside_travel, program_start
 from jaxcnc.planners.limits import NUMERIC_MARGIN
 from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (register the planners)
 from jaxcnc.planners.pulsed.request import (
@@ -73,25 +73,23 @@ def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
     lim = machine.limits(PROGRAM_AXES)
     home = program_start(machine)
     for col, axis in enumerate(PROGRAM_AXES):
-        if axis not in names:
-            moved = np.flatnonzero(pts[:, col] != home[col])
-            if moved.size:
-                k = int(moved[0])
-                raise SourceError(
-                    job.file, int(job.line[k]), 0, f"the point needs axis {axis.upper()}, which {machine.name!r} lacks"
-                )
+        if axis in names:
             continue
-        ax = machine.axis(axis)
-        out = np.flatnonzero((pts[:, col] < ax.min) | (pts[:, col] > ax.max))
-        if out.size:
-            k = int(out[0])
+        moved = np.flatnonzero(pts[:, col] != home[col])
+        if moved.size:
+            k = int(moved[0])
             raise SourceError(
-                job.file,
-                int(job.line[k]),
-                0,
-                f"{axis.upper()} {pts[k, col]:g} mm is outside the travel of machine {machine.name!r} "
-                f"[{ax.min:g}, {ax.max:g}]",
+                job.file, int(job.line[k]), 0, f"the point needs axis {axis.upper()}, which {machine.name!r} lacks"
             )
+    out = outside_travel(pts, pts, machine, tol_mm=0.0)
+    if out is not None:
+        k, axis, value, ax = out
+        raise SourceError(
+            job.file,
+            int(job.line[k]),
+            0,
+            f"{axis.upper()} {value:g} mm is outside the travel of machine {machine.name!r} [{ax.min:g}, {ax.max:g}]",
+        )
     keep = 1.0 - NUMERIC_MARGIN
 
     def lim_of(key: str) -> np.ndarray:
@@ -123,16 +121,13 @@ def plan_points(job: PointJob, machine: MachineConfig, planner: str = DEFAULT_PU
 
 def _check_travel(plan: PulsePlan, machine: MachineConfig, job: PointJob) -> None:
     lo, hi = plan.trajectory.extents()
-    for col, axis in enumerate(PROGRAM_AXES):
-        if axis not in machine.axis_names:
-            continue
-        ax = machine.axis(axis)
-        if lo[col] < ax.min - 1e-9 or hi[col] > ax.max + 1e-9:
-            value = lo[col] if lo[col] < ax.min else hi[col]
-            raise SourceError(
-                job.file,
-                0,
-                0,
-                f"passing through the points, {axis.upper()} swings to {value:.6g} mm, outside the travel "
-                f"[{ax.min:g}, {ax.max:g}] of machine {machine.name!r}; move the job away from the edge",
-            )
+    out = outside_travel(lo[None], hi[None], machine)
+    if out is not None:
+        _, axis, value, ax = out
+        raise SourceError(
+            job.file,
+            0,
+            0,
+            f"passing through the points, {axis.upper()} swings to {value:.6g} mm, outside the travel "
+            f"[{ax.min:g}, {ax.max:g}] of machine {machine.name!r}; move the job away from the edge",
+        )
