@@ -1,9 +1,9 @@
 """Velocity planners: machine limits → the time law ``s(t)`` of the whole program.
 
-Importing this package registers the built-in planners (``lookahead``).
+Importing this package registers the built-in planners (``lookahead``, ``topp``).
 """
 
-from jaxcnc.planners import trapezoid  # noqa: F401  (registers "lookahead")
+from jaxcnc.planners import topp, trapezoid  # noqa: F401  (register "topp", "lookahead")
 from jaxcnc.planners.job import PlannedJob, plan_job, program_start
 from jaxcnc.planners.registry import PlanRequest, get_planner, planner_names, register_planner
 from jaxcnc.planners.timelaw import Plan, sample_plan

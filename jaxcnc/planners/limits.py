@@ -118,3 +118,30 @@ def junction_caps(
     budget = JUNCTION_SHARE * a_max / tick_hz  # mm/s of velocity step per axis
     v = jnp.min(jnp.where(d > 0, budget[None, :] / jnp.where(d > 0, d, 1.0), jnp.inf), axis=1)
     return jnp.where(is_corner(tangent_out_prev, tangent_in), 0.0, v**2)
+
+
+def junctions(
+    kind: jnp.ndarray,
+    tangent_in: jnp.ndarray,
+    tangent_out: jnp.ndarray,
+    stop_before: jnp.ndarray,
+    a_max: jnp.ndarray,
+    tick_hz: float,
+) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """How the motion passes each junction between spans.
+
+    Args:
+        kind: ``(n,)`` span kinds; tangent_in, tangent_out: ``(n, 3)``; stop_before: ``(n,)`` bool
+            (exact stop programmed before the span).
+    Returns:
+        ``at_kink`` ``(n,)`` bool — the span starts or ends at a junction passed moving with a
+        velocity step (its smooth acceleration budget is reduced) — and ``j_cap`` ``(n-1,)``, the
+        v² cap of each junction (0 where the motion stops: programmed stops, corners, points).
+    """
+    t_prev, t_next = tangent_out[:-1], tangent_in[1:]
+    stop = stop_before[1:] | is_corner(t_prev, t_next) | (kind[:-1] == SpanKind.POINT) | (kind[1:] == SpanKind.POINT)
+    kink = ~stop & (jnp.max(jnp.abs(t_prev - t_next), axis=1) > KINK_TOL)  # passed moving, with a velocity step
+    no = jnp.zeros((1,), bool)
+    at_kink = jnp.concatenate([no, kink]) | jnp.concatenate([kink, no])
+    j_cap = jnp.where(stop, 0.0, junction_caps(t_prev, t_next, a_max, tick_hz))
+    return at_kink, j_cap

@@ -27,12 +27,15 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """The time law of a whole program, one segment per span (NumPy arrays ``(n,)``).
+    """The time law of a whole program as segments (NumPy arrays ``(n_segments,)``).
 
-    Segment ``k`` starts at tick ``group_tick[k] + offset_ticks[k]`` (fractional), runs
-    ``t_acc, t_cru, t_dec`` seconds (a dwell is all cruise at zero speed), with speeds
-    ``v0 → vp → v1`` mm/s and ramp accelerations ``a_acc``, ``a_dec`` mm/s². ``first_tick[k]`` is
-    the first tick at or after its start. The table has ticks ``0..n_ticks``.
+    A segment is a span or, where a planner cuts curved spans finer, a piece of one: it covers
+    ``length[k]`` mm of span ``span[k]`` from ``s_start[k]`` mm after the span's start (spans in
+    path order, each covered by consecutive segments). Segment ``k`` starts at tick
+    ``group_tick[k] + offset_ticks[k]`` (fractional), runs ``t_acc, t_cru, t_dec`` seconds (a dwell
+    is all cruise at zero speed), with speeds ``v0 → vp → v1`` mm/s and ramp accelerations
+    ``a_acc``, ``a_dec`` mm/s². ``first_tick[k]`` is the first tick at or after its start. The
+    table has ticks ``0..n_ticks``.
     """
 
     length: np.ndarray
@@ -49,6 +52,8 @@ class Plan:
     first_tick: np.ndarray
     n_ticks: int
     tick_hz: float
+    span: np.ndarray
+    s_start: np.ndarray
 
     def __len__(self) -> int:
         return int(self.length.shape[0])
@@ -60,6 +65,10 @@ class Plan:
     @property
     def duration_s(self) -> np.ndarray:
         return self.t_acc + self.t_cru + self.t_dec
+
+    def span_first_segment(self, n_spans: int) -> np.ndarray:
+        """``(n_spans,)`` index of the first segment of each span."""
+        return np.searchsorted(self.span, np.arange(n_spans), side="left")
 
 
 def _safe_div(num: jnp.ndarray, den: jnp.ndarray) -> jnp.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.spans import SpanKind
-from jaxcnc.planners.limits import KINK_TOL, NUMERIC_MARGIN, is_corner, junction_caps, span_caps
+from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
@@ -38,14 +38,8 @@ def plan_arrays(
     Returns the dict of :func:`~jaxcnc.planners.timelaw.align_to_ticks` plus ``x_node`` (v² at
     the ``n+1`` nodes).
     """
-    t_prev, t_next = tangent_out[:-1], tangent_in[1:]
-    stop = stop_before[1:] | is_corner(t_prev, t_next) | (kind[:-1] == SpanKind.POINT) | (kind[1:] == SpanKind.POINT)
-    kink = ~stop & (jnp.max(jnp.abs(t_prev - t_next), axis=1) > KINK_TOL)  # passed moving, with a velocity step
-    no = jnp.zeros((1,), bool)
-    at_kink = jnp.concatenate([no, kink]) | jnp.concatenate([kink, no])
+    at_kink, j_cap = junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
     x_cap, a_t = span_caps(kind, length, kappa, tangent_in, moving, feed, v_max, a_max, chord_tol, tick_hz, at_kink)
-    j_cap = junction_caps(t_prev, t_next, a_max, tick_hz)
-    j_cap = jnp.where(stop, 0.0, j_cap)
     j_cap = jnp.minimum(j_cap, jnp.minimum(x_cap[:-1], x_cap[1:]))
     zero = jnp.zeros((1,), jnp.float64)
     node_cap = jnp.concatenate([zero, j_cap, zero])
@@ -92,4 +86,11 @@ def plan_lookahead(req: PlanRequest) -> Plan:
     arrays = {k: np.asarray(out[k][:n]) for k in keys}
     for v in arrays.values():
         v.setflags(write=False)
-    return Plan(length=spans.length, n_ticks=int(out["n_ticks"]), tick_hz=machine.tick_hz, **arrays)
+    return Plan(
+        length=spans.length,
+        n_ticks=int(out["n_ticks"]),
+        tick_hz=machine.tick_hz,
+        span=np.arange(n),
+        s_start=np.zeros(n),
+        **arrays,
+    )

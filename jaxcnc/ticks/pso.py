@@ -36,7 +36,7 @@ def _time_in_span(plan: Plan, k: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def pso_events(plan: Plan, lit: np.ndarray, pso_mm: float) -> np.ndarray:
-    """``PSO_PULSE`` events ``(EVENT_DTYPE)`` every ``pso_mm`` along the lit spans (``lit`` ``(n,)`` bool)."""
+    """``PSO_PULSE`` events ``(EVENT_DTYPE)`` every ``pso_mm`` along the lit segments (``lit``: ``(n_segments,)``)."""
     length = np.where(lit, plan.length, 0.0)
     run_start = lit & ~np.concatenate([[False], lit[:-1]])
     run = np.cumsum(run_start) - 1  # run index of each lit span

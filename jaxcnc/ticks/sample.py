@@ -32,11 +32,12 @@ CHUNK_TICKS = 1 << 16
 def _params_chunk(
     first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Segment and span parameter ``u`` ``(chunk,)`` of ticks ``first + i``: tick → s → u."""
+    """Span and span parameter ``u`` ``(chunk,)`` of ticks ``first + i``: tick → segment → s → u."""
     tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
     seg = segment_of_tick(plan["first_tick"], tick)
-    s = s_at(plan, spans["length"], seg, tick, tick_hz)
-    return seg, u_of_s(spans, seg, s)
+    s = plan["s_start"][seg] + s_at(plan, plan["length"], seg, tick, tick_hz)
+    span = plan["span"][seg]
+    return span, u_of_s(spans, span, s)
 
 
 @jax.jit
@@ -48,7 +49,7 @@ def _positions(spans: dict, seg: jnp.ndarray, u: jnp.ndarray) -> jnp.ndarray:
 def _positions_chunk(
     first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Exact program-axis positions ``(chunk, 3)`` and their segment, for ticks ``first + i``.
+    """Exact program-axis positions ``(chunk, 3)`` and their span, for ticks ``first + i``.
 
     Two compiled programs, not one: fused together, XLA's CPU backend recomputes the time law
     and ``u(s)`` inside every use Horner's scheme makes of ``u`` (measured 4x slower).
@@ -96,8 +97,9 @@ class TickSampler:
         def pad(a: np.ndarray, fill) -> np.ndarray:
             return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
 
-        self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in PLAN_KEYS}
-        self._spans = span_arrays(pad_spans(spans, m))
+        keys = PLAN_KEYS + ("length", "span", "s_start")
+        self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in keys}
+        self._spans = span_arrays(pad_spans(spans, bucket_size(len(spans))))
         m_axes = job.machine.axis_names
         self._src = np.asarray(job.axis_source)
         self._home = np.array([job.machine.axis(a).home for a in m_axes])
@@ -107,7 +109,7 @@ class TickSampler:
         return self.job.plan.n_ticks + 1
 
     def program_positions(self, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
-        """Exact x, y, z positions ``(count, 3)`` mm and segment index of ticks ``first..``."""
+        """Exact x, y, z positions ``(count, 3)`` mm and span index of ticks ``first..``."""
         p, seg = _positions_chunk(
             jnp.int64(first),
             jnp.int64(self.job.plan.n_ticks),

@@ -34,7 +34,7 @@ def job_events(job: PlannedJob) -> np.ndarray:
     """The event records of a job, sorted by tick (``EVENT_DTYPE``)."""
     prog, spans, plan = job.program, job.spans, job.plan
     rows = spans.block
-    tick = plan.first_tick
+    tick = plan.first_tick[plan.span_first_segment(len(spans))]  # where each span starts
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     parts = []
 
@@ -69,7 +69,7 @@ def job_events(job: PlannedJob) -> np.ndarray:
         add(tick[sel], ek, prog.event_value[rows[sel]], 0.0, seg=sel)
     if job.machine.laser.mode == "pso":
         moving = lit & (spans.kind != SpanKind.POINT)
-        pso = pso_events(plan, moving, job.machine.laser.pso_mm)
+        pso = pso_events(plan, moving[plan.span], job.machine.laser.pso_mm)
         parts.append(pso)
         order.append(np.full(pso.shape[0], len(rows) * 8 + EventKind.PSO_PULSE))
     out = np.concatenate(parts)

@@ -1,0 +1,152 @@
+"""The planner ``topp``: time-optimal speed along the whole program, per-axis limits coupled exactly.
+
+Spans → grid (:mod:`~jaxcnc.planners.grid`: lines whole, curves cut fine) → per-interval
+constraint rows → phase-plane passes (:mod:`~jaxcnc.planners.phaseplane`) → one segment per
+interval (a trapezoid on lines, a constant-acceleration ramp on curved intervals) → tick
+alignment (:mod:`~jaxcnc.planners.timelaw`), the whole in one jitted array program.
+
+What each interval is allowed (per axis ``i``, ``x = v²``):
+
+* speed: ``x ≤ (V_i / |T_i|)²`` at both ends, ``x ≤ feed²``, and the chord cap: a drive
+  interpolates linearly between ticks, and a chord subtending ``Δθ`` on radius ``1/κ`` has
+  sagitta ``(1 - cos(Δθ/2))/κ``, so ``v ≤ 2 acos(1 - tol κ)/κ · f``;
+* acceleration: ``|T_i s̈ + K_i ṡ²| ≤ A_i`` at both ends — tangential and centripetal parts with
+  their signs, on each axis separately (a diagonal move uses both axes' budgets, a curve
+  accelerates while it turns where the axes allow it);
+* junctions between spans as in the ``lookahead`` planner (:func:`~jaxcnc.planners.limits.junctions`):
+  exact stop at corners, velocity steps within ``JUNCTION_SHARE`` of a tick's acceleration at
+  near-tangent kinks (the spans beside them keep the rest).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, interval_counts
+from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, junctions
+from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
+from jaxcnc.planners.registry import PlanRequest, register_planner
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
+from jaxcnc.planners.trapezoid import bucket_size
+
+#: Stand-in for an infinite limit (absent axis) that keeps the eliminations free of inf - inf.
+BIG = 1e30
+
+
+def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndarray, chord_tol_mm, tick_hz):
+    """``(m,)`` cap on ``x = v²`` at nodes with frame ``t``, ``k`` ``(m, 3)``: axis speeds, feed, chord error."""
+    comp = jnp.abs(t)
+    x_axis = jnp.min(jnp.where(comp > 0, (v_max / jnp.where(comp > 0, comp, 1.0)) ** 2, jnp.inf), axis=1)
+    kappa = jnp.linalg.norm(k, axis=1)
+    bent = kappa > 0
+    k_safe = jnp.where(bent, kappa, 1.0)
+    cos_half = jnp.clip(1.0 - chord_tol_mm * k_safe, -1.0, 1.0)
+    v_chord = jnp.where(bent, 2.0 * jnp.arccos(cos_half) / k_safe * tick_hz, jnp.inf)
+    return jnp.minimum(jnp.minimum(x_axis, feed**2), v_chord**2)
+
+
+@partial(jax.jit, static_argnames=("curved_any",))
+def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: bool):
+    """The planner as one array program over ``m`` (padded) intervals; see the module docstring.
+
+    ``g`` holds the grid (``span, delta, t_a, k_a, t_b, k_b, curved, feed, dwell``), ``sp`` the span
+    arrays the junctions need (``kind, tangent_in, tangent_out, stop_before``).
+    """
+    at_kink, j_cap = junctions(sp["kind"], sp["tangent_in"], sp["tangent_out"], sp["stop_before"], a_max, tick_hz)
+    span, curved = g["span"], g["curved"]
+    n = sp["kind"].shape[0]
+    first = jnp.concatenate([jnp.ones(1, bool), span[1:] != span[:-1]])
+    last = jnp.concatenate([span[1:] != span[:-1], jnp.ones(1, bool)])
+    # junction caps at the span ends (0 before the first and after the last span: rest)
+    cap_start = jnp.concatenate([jnp.zeros(1), j_cap])
+    cap_end = jnp.concatenate([j_cap, jnp.zeros(1)])
+    share = jnp.where(at_kink[span], 1.0 - JUNCTION_SHARE, 1.0) * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
+    acc = jnp.minimum(a_max, BIG)[None, :] * share[:, None]
+    vel = jnp.minimum(v_max, BIG)[None, :] * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)[:, None]
+    vcap_a = speed_cap(g["t_a"], g["k_a"], vel, g["feed"], chord_tol, tick_hz)
+    vcap_b = speed_cap(g["t_b"], g["k_b"], vel, g["feed"], chord_tol, tick_hz)
+    is_point = sp["kind"][span] == SpanKind.POINT
+    cap_a = jnp.where(is_point, 0.0, jnp.where(first, jnp.minimum(vcap_a, cap_start[span]), vcap_a))
+    cap_b = jnp.where(is_point, 0.0, jnp.where(last, jnp.minimum(vcap_b, cap_end[jnp.clip(span, 0, n - 1)]), vcap_b))
+    delta = g["delta"]
+    gu, gx, h = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b)
+    x_node = solve(gu, gx, h, delta, cap_a, jnp.zeros(()), curved_any)
+    x0, x1 = x_node[:-1], x_node[1:]
+    # Lines: a trapezoid under the span's speed cap with the axes' tangential budget.
+    # Curved intervals: x linear in s between the nodes (constant s̈), as planned.
+    two_d = 2.0 * jnp.where(delta > 0, delta, 1.0)
+    a_line = line_reach(gu[:, :-2], h[:, :-2], delta) / two_d
+    x_cap = jnp.where(curved, jnp.maximum(x0, x1), jnp.minimum(vcap_a, vcap_b))
+    a_seg = jnp.where(curved, jnp.abs(x1 - x0) / two_d, a_line)
+    prof = trapezoids(x_node, x_cap, a_seg, delta, g["dwell"])
+    return align_to_ticks(prof, x0 == 0.0, tick_hz)
+
+
+def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
+    return np.pad(a, [(0, n - a.shape[0])] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
+
+
+def request_grid(req: PlanRequest) -> Grid:
+    """The grid a request is planned on (curved spans cut by speed cap and curvature)."""
+    spans = req.spans
+    moving = spans.hi - spans.lo > 1e-12
+    v_axes = np.min(np.where(moving, req.v_max[None, :], np.inf), axis=1)
+    return build_grid(spans, interval_counts(spans, np.minimum(req.feed_mm_s, v_axes), req.machine.tick_hz))
+
+
+@register_planner("topp")
+def plan_topp(req: PlanRequest) -> Plan:
+    """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
+    spans, machine = req.spans, req.machine
+    grid = request_grid(req)
+    n, m = len(spans), len(grid)
+    mb, nb = bucket_size(m), bucket_size(n + 1)  # room for the padding point span n
+    s = grid.span
+    g = {
+        "span": _pad(s, mb, n - 1),
+        "delta": _pad(grid.delta, mb, 0.0),
+        "t_a": _pad(grid.t_a, mb, 0.0),
+        "k_a": _pad(grid.k_a, mb, 0.0),
+        "t_b": _pad(grid.t_b, mb, 0.0),
+        "k_b": _pad(grid.k_b, mb, 0.0),
+        "curved": _pad(grid.curved, mb, False),
+        "feed": _pad(req.feed_mm_s[s], mb, 0.0),
+        "dwell": _pad(np.where(grid.s_start == 0, req.dwell_s[s], 0.0), mb, 0.0),
+    }
+    # padding intervals sit on a padding point span after the program
+    g["span"][m:] = n
+    sp = {
+        "kind": _pad(spans.kind, nb, SpanKind.POINT),
+        "tangent_in": _pad(spans.tangent_in, nb, 0.0),
+        "tangent_out": _pad(spans.tangent_out, nb, 0.0),
+        "stop_before": _pad(req.stop_before, nb, True),
+    }
+    keep = 1.0 - NUMERIC_MARGIN
+    out = plan_grid(
+        g,
+        sp,
+        jnp.asarray(req.v_max) * keep,
+        jnp.asarray(req.a_max) * keep,
+        machine.path.chord_tol_mm,
+        machine.tick_hz,
+        curved_any=bool(grid.curved.any()),
+    )
+    out = jax.device_get(out)
+    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
+    arrays = {k: np.asarray(out[k][:m]) for k in keys}
+    for v in arrays.values():
+        v.setflags(write=False)
+    return Plan(
+        length=grid.delta,
+        n_ticks=int(out["n_ticks"]),
+        tick_hz=machine.tick_hz,
+        span=grid.span,
+        s_start=grid.s_start,
+        **arrays,
+    )
