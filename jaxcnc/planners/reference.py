@@ -1,0 +1,120 @@
+"""What the reference planners (``toppra``, ``casadi``) share: a uniform grid, rest-to-rest pieces, a Plan.
+
+The references are grid methods: they choose ``x = ṡ²`` at grid nodes and hold ``s̈`` constant in
+between, like :mod:`jaxcnc.planners.phaseplane` but solved by an external library, so researchers
+can compare profiles through the same interface and the same verified tick table. They plan each
+piece between rests (corners, programmed stops, dwells) from rest to rest; they do not model the
+velocity steps the built-in planners allow at near-tangent kinks, nor the chord-error cap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.planners.grid import Grid, build_grid
+from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions
+from jaxcnc.planners.registry import PlanRequest
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
+
+#: Grid points of a reference plan unless the request's machine says otherwise.
+DEFAULT_POINTS = 16_000
+
+
+@dataclass(frozen=True, eq=False)
+class RefProblem:
+    """A request on a uniform grid: frames at the nodes and the rest-to-rest pieces.
+
+    Attributes:
+        grid: the intervals (every span boundary is a node).
+        s: ``(m+1,)`` node positions (mm from the program start).
+        t, k: ``(m+1, 3)`` tangent and curvature vector at the nodes (one-sided at span boundaries:
+            the value of the interval that starts there).
+        feed: ``(m+1,)`` programmed speed at the nodes (the lower of the two spans at a boundary).
+        pieces: list of ``(first_node, last_node)`` planned from rest to rest.
+        v_max, a_max: ``(3,)`` axis limits (kept ``NUMERIC_MARGIN`` below the machine's).
+    """
+
+    grid: Grid
+    s: np.ndarray
+    t: np.ndarray
+    k: np.ndarray
+    feed: np.ndarray
+    pieces: list[tuple[int, int]]
+    v_max: np.ndarray
+    a_max: np.ndarray
+
+
+def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
+    """Cut the request's spans into about ``n_points`` equal-length intervals and find the pieces."""
+    spans = req.spans
+    total = float(np.sum(spans.length))
+    h = total / max(n_points - 1, 1)
+    counts = np.where(spans.kind == SpanKind.POINT, 1, np.maximum(1, np.ceil(spans.length / h - 1e-9)))
+    grid = build_grid(spans, counts.astype(np.int64))
+    t = np.concatenate([grid.t_a, grid.t_b[-1:]])
+    k = np.concatenate([grid.k_a, grid.k_b[-1:]])
+    s = np.concatenate([[0.0], np.cumsum(grid.delta)])
+    f_int = req.feed_mm_s[grid.span]
+    feed = np.minimum(np.concatenate([f_int, f_int[-1:]]), np.concatenate([f_int[:1], f_int]))
+    _, j_cap = junctions(
+        jnp.asarray(spans.kind),
+        jnp.asarray(spans.tangent_in),
+        jnp.asarray(spans.tangent_out),
+        jnp.asarray(req.stop_before),
+        jnp.asarray(req.a_max),
+        req.machine.tick_hz,
+    )
+    rest_span = np.concatenate([[True], np.asarray(j_cap) == 0.0, [True]])  # rest at span boundary b
+    first_node = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)  # node index of each span boundary
+    rest_nodes = np.unique(first_node[rest_span])
+    pieces = [(int(a), int(b)) for a, b in zip(rest_nodes[:-1], rest_nodes[1:], strict=True) if s[b] > s[a]]
+    keep = 1.0 - NUMERIC_MARGIN
+    return RefProblem(grid, s, t, k, feed, pieces, req.v_max * keep, req.a_max * keep)
+
+
+def node_caps(p: RefProblem) -> np.ndarray:
+    """``(m+1,)`` cap on ``x`` at the nodes from the axis speeds and the feed."""
+    comp = np.abs(p.t)
+    with np.errstate(divide="ignore"):
+        x_axis = np.min(np.where(comp > 0, (p.v_max / comp) ** 2, np.inf), axis=1)
+    return np.minimum(x_axis, p.feed**2)
+
+
+def plan_from_nodes(p: RefProblem, x_node: np.ndarray, req: PlanRequest) -> Plan:
+    """A Plan holding ``s̈`` constant on every interval between the nodes' ``x`` ``(m+1,)``."""
+    g = p.grid
+    x = np.maximum(np.asarray(x_node, dtype=np.float64), 0.0)
+    x0, x1 = x[:-1], x[1:]
+    two_d = 2.0 * np.where(g.delta > 0, g.delta, 1.0)
+    dwell = np.where(g.s_start == 0, req.dwell_s[g.span], 0.0)
+    prof = trapezoids(
+        jnp.asarray(x), jnp.asarray(np.maximum(x0, x1)), jnp.asarray(np.abs(x1 - x0) / two_d), g.delta, dwell
+    )
+    out = {k: np.asarray(v) for k, v in align_to_ticks(prof, jnp.asarray(x0 == 0.0), req.machine.tick_hz).items()}
+    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
+    return Plan(
+        length=g.delta,
+        n_ticks=int(out["n_ticks"]),
+        tick_hz=req.machine.tick_hz,
+        span=g.span,
+        s_start=g.s_start,
+        **{k: out[k] for k in keys},
+    )
+
+
+def import_optional(name: str):
+    """Import an optional reference library or say how to install it."""
+    import importlib
+
+    from jaxcnc.errors import PlanningError
+
+    try:
+        return importlib.import_module(name)
+    except ImportError:
+        raise PlanningError(
+            f"the {name!r} reference planner needs the {name} package: pip install 'jaxcnc[ref]'"
+        ) from None
