@@ -52,7 +52,7 @@ def casadi_planner(n_points: int = DEFAULT_POINTS, tol: float = 1e-9) -> Planner
             v_cap = np.sqrt(cap[a : b + 1])
             v_cap[0] = v_cap[-1] = 0.0
             nlp = {"x": ca.vertcat(c, u), "f": ca.sum1(2.0 * d / (c[:-1] + c[1:] + 1e-12)), "g": ca.vertcat(*g)}
-            opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0, "ipopt.tol": tol, "ipopt.max_iter": 3000}
+            opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0, "ipopt.tol": tol}
             solver = ca.nlpsol("topp", "ipopt", nlp, opts)
             guess = np.concatenate([np.minimum(v_cap, 0.1 * np.sqrt(np.max(cap[a : b + 1]))), np.zeros(n)])
             guess[0] = guess[n] = 0.0
