@@ -168,4 +168,4 @@ def test_unknown_planner(tmp_path, capsys):
     prog = tmp_path / "p.ngc"
     prog.write_text("G1 X1 F60\n")
     assert main(["plan", str(prog), "-m", str(EXAMPLE_MACHINE), "-o", str(tmp_path / "o.ticks"), "--planner", "x"]) == 2
-    assert "unknown planner 'x'; known: lookahead" in capsys.readouterr().err
+    assert "unknown planner 'x'; known: casadi, lookahead, topp, toppra" in capsys.readouterr().err

@@ -83,7 +83,9 @@ def plan_file(
         return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
     if reorder:
         raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
-    return plan_program_file(input_path, machine, out, planner or "lookahead", progress, dialect)
+    from jaxcnc.planners.registry import DEFAULT_PLANNER
+
+    return plan_program_file(input_path, machine, out, planner or DEFAULT_PLANNER, progress, dialect)
 
 
 def _measured(meas) -> dict:

@@ -115,7 +115,11 @@ def _quadratic(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, w1: np.ndarray) -
 
 
 def _line_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
-    a, b = p.start[rows], p.end[rows]
+    return line_spans(p.start[rows], p.end[rows], rows)
+
+
+def line_spans(a: np.ndarray, b: np.ndarray, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """Span fields of straight moves from ``a`` to ``b`` ``(n, 3)`` (program rows ``rows``)."""
     d = b - a
     length = np.linalg.norm(d, axis=1)
     t = d / length[:, None]
@@ -347,9 +351,9 @@ def _point_spans(p: Program, rows: np.ndarray) -> dict[str, np.ndarray]:
     )
 
 
-def span_degree(program: Program) -> int:
-    """The bucketed common degree for a program's spans."""
-    need = 2
+def span_degree(program: Program, min_degree: int = 2) -> int:
+    """The bucketed common degree for a program's spans (at least ``min_degree``)."""
+    need = min_degree
     if program.curves is not None and np.any(program.kind == Kind.CURVE):
         used = program.curve[program.kind == Kind.CURVE]
         need = max(need, int(np.max(program.curves.degree[used])))
@@ -375,21 +379,37 @@ _KEYS = (
 )
 
 
-def build_spans(program: Program) -> Spans:
+def build_spans(program: Program, corner_tol_mm: float = 0.0) -> Spans:
     """Turn a Program's rows into spans in path order (vectorised over rows).
 
-    Zero-length moves produce no span; dwell and event rows produce point spans.
+    Zero-length moves produce no span; dwell and event rows produce point spans. Corners between
+    lines are blended within the program's G64 P tolerance (``corner_tol_mm`` where G64 has no P;
+    see :mod:`jaxcnc.geometry.blend`).
     """
+    from jaxcnc.geometry.blend import BLEND_DEGREE, blend_tolerances, corner_blends
+
     kind = program.kind
-    degree = span_degree(program)
     move_len = np.linalg.norm(program.end - program.start, axis=1)
     is_line = (kind == Kind.LINE) & (move_len > MIN_LENGTH_MM)
+    tol = blend_tolerances(program, is_line, corner_tol_mm)
+    blending = bool(np.any(tol > 0))
+    degree = span_degree(program, BLEND_DEGREE if blending else 2)
     parts = []
     normal = _plane_perm(program, np.arange(len(program)))[:, 2]
     rise = np.take_along_axis(program.end - program.start, normal[:, None], axis=1)[:, 0]
     helical = (kind == Kind.ARC) & (np.abs(rise) > MIN_LENGTH_MM)
     has_curves = bool(np.any(kind == Kind.CURVE)) or bool(helical.any())
     n_cheb = (CHEB_N + 1, CHEB_N) if has_curves else (0, 0)
+    line_rows = np.flatnonzero(is_line)
+    if blending:
+        lines, blends = corner_blends(program, line_rows, tol)
+        parts.append(lines)
+        if blends is not None:
+            parts.append(_certified(elevate(blends[0], degree), blends[1], blends[2]))
+            parts[-1]["blend"] = True
+            has_curves = True
+            n_cheb = (CHEB_N + 1, CHEB_N)
+        is_line = np.zeros_like(is_line)
     for build, mask in (
         (_line_spans, is_line),
         (_arc_spans, (kind == Kind.ARC) & ~helical),
@@ -418,8 +438,10 @@ def build_spans(program: Program) -> Spans:
                 v = np.full(n, v)
             chunks.append(np.asarray(v))
         cols[key] = np.concatenate(chunks)
-    # Path order: by program row, then by piece order within a block (stable sort keeps it).
-    order = np.argsort(cols["block"], kind="stable")
+    # Path order: by program row, a corner blend first (it ends where its row's line starts),
+    # then by piece order within a block (the sort is stable).
+    blend = np.concatenate([np.full(np.size(pt["block"]), bool(pt.get("blend", False))) for pt in parts])
+    order = np.lexsort((~blend, cols["block"]))
     out = {k: np.ascontiguousarray(v[order]) for k, v in cols.items()}
     out["kind"] = out["kind"].astype(np.int8)
     out["block"] = out["block"].astype(np.int32)

@@ -28,6 +28,8 @@ from jaxcnc.geometry.spans import SpanKind, Spans, pad_spans
 
 TICKS_PER_INTERVAL = 4.0
 MAX_TURN_RAD = 0.0175  # 1°
+#: The tick rule does not cut intervals shorter than this (slow feeds need no finer time resolution).
+MIN_INTERVAL_MM = 0.02
 #: Fraction of the acceleration kept back on curved intervals for the change of T and K inside one.
 GRID_MARGIN = 2e-3
 MAX_INTERVALS_PER_SPAN = 1 << 16
@@ -72,7 +74,7 @@ def interval_counts(spans: Spans, v_cap_mm_s: np.ndarray, tick_hz: float) -> np.
     """
     ticks_mm = np.maximum(v_cap_mm_s, 1e-9) * TICKS_PER_INTERVAL / tick_hz
     turn_mm = np.where(spans.kappa_max > 0, MAX_TURN_RAD / np.maximum(spans.kappa_max, 1e-300), np.inf)
-    h = np.minimum(ticks_mm, turn_mm)
+    h = np.minimum(np.maximum(ticks_mm, MIN_INTERVAL_MM), turn_mm)
     n = np.ceil(spans.length / h)
     n = np.where(is_curved(spans.kind), np.clip(n, 1, MAX_INTERVALS_PER_SPAN), 1)
     return n.astype(np.int64)
@@ -96,6 +98,18 @@ def _bucket(n: int) -> int:
     return max(256, 1 << max(0, int(n - 1).bit_length()))
 
 
+def frames_at(spans: Spans, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`path_frame` for NumPy queries ``(q,)``, padded to a bucket (few compiled sizes)."""
+    arrays = span_arrays(pad_spans(spans, _bucket(len(spans))))
+    q = span.size
+    m = _bucket(q)
+    which = np.zeros(m, np.int64)
+    where = np.zeros(m)
+    which[:q], where[:q] = span, s
+    t, k = path_frame(arrays, jnp.asarray(which), jnp.asarray(where))
+    return np.asarray(t)[:q], np.asarray(k)[:q]
+
+
 def build_grid(spans: Spans, counts: np.ndarray) -> Grid:
     """Cut ``spans`` into ``counts[k]`` equal intervals each and evaluate the frame at their ends."""
     n = len(spans)
@@ -113,13 +127,7 @@ def build_grid(spans: Spans, counts: np.ndarray) -> Grid:
     k_b = np.zeros_like(t_b)
     idx = np.flatnonzero(curved)
     if idx.size:
-        arrays = span_arrays(pad_spans(spans, _bucket(n)))
-        m = _bucket(2 * idx.size)
-        which = np.zeros(m, np.int64)
-        where = np.zeros(m)
-        which[: 2 * idx.size] = np.concatenate([span[idx], span[idx]])
-        where[: 2 * idx.size] = np.concatenate([s_start[idx], s_end[idx]])
-        t, k = (np.asarray(x)[: 2 * idx.size] for x in path_frame(arrays, jnp.asarray(which), jnp.asarray(where)))
+        t, k = frames_at(spans, np.concatenate([span[idx], span[idx]]), np.concatenate([s_start[idx], s_end[idx]]))
         t_a[idx], t_b[idx] = t[: idx.size], t[idx.size :]
         k_a[idx], k_b[idx] = k[: idx.size], k[idx.size :]
     return Grid(span=span, s_start=s_start, delta=delta, t_a=t_a, k_a=k_a, t_b=t_b, k_b=k_b, curved=curved)

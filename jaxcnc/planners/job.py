@@ -14,7 +14,7 @@ import numpy as np
 from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
 from jaxcnc.machine import AxisConfig, MachineConfig
-from jaxcnc.planners.registry import PlanRequest, get_planner
+from jaxcnc.planners.registry import DEFAULT_PLANNER, PlanRequest, get_planner
 from jaxcnc.planners.timelaw import Plan
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 
@@ -92,11 +92,11 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
         )
 
 
-def plan_job(program: Program, machine: MachineConfig, planner: str = "lookahead") -> PlannedJob:
+def plan_job(program: Program, machine: MachineConfig, planner: str = DEFAULT_PLANNER) -> PlannedJob:
     """Plan ``program`` on ``machine`` with the named planner."""
     t0 = time.perf_counter()
     axis_source = _check_axes(program, machine)
-    spans = build_spans(program)
+    spans = build_spans(program, machine.path.corner_tol_mm)
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)

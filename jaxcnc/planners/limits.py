@@ -84,8 +84,7 @@ def span_caps(
     bent = kappa > 0
     k_safe = jnp.where(bent, kappa, 1.0)
     x_centripetal = jnp.where(bent, ARC_NORMAL_SHARE * a_curve / k_safe, jnp.inf)
-    cos_half = jnp.clip(1.0 - chord_tol_mm * k_safe, -1.0, 1.0)
-    v_chord = jnp.where(bent, 2.0 * jnp.arccos(cos_half) / k_safe * tick_hz, jnp.inf)
+    v_chord = chord_speed(kappa, chord_tol_mm, tick_hz)
     x_curve = jnp.minimum(jnp.minimum(v_curve, v_chord) ** 2, x_centripetal)
 
     x_axis = jnp.where(curved, x_curve, v_line**2)
@@ -94,6 +93,18 @@ def span_caps(
     a_t = jnp.where(curved, jnp.sqrt(jnp.maximum(a_curve**2 - a_n**2, 0.0)), a_line)
     is_point = kind == SpanKind.POINT
     return jnp.where(is_point, 0.0, x_cap), jnp.where(is_point, jnp.inf, a_t)
+
+
+def chord_speed(kappa: jnp.ndarray, chord_tol_mm: float, tick_hz: float) -> jnp.ndarray:
+    """Speed (mm/s) at which one tick's chord on curvature ``kappa`` has sagitta ``chord_tol_mm``.
+
+    ``Δθ = 2 acos(1 - tol κ)``, written ``4 asin(sqrt(tol κ / 2))`` so that it stays accurate
+    where ``tol κ`` is below the float64 resolution of ``1 - tol κ``; ``inf`` where ``κ = 0``.
+    """
+    bent = kappa > 0
+    k_safe = jnp.where(bent, kappa, 1.0)
+    dtheta = 4.0 * jnp.arcsin(jnp.sqrt(jnp.clip(chord_tol_mm * k_safe / 2.0, 0.0, 1.0)))
+    return jnp.where(bent, dtheta / k_safe * tick_hz, jnp.inf)
 
 
 def is_corner(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray) -> jnp.ndarray:

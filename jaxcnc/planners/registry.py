@@ -40,6 +40,8 @@ class PlanRequest:
 
 
 Planner = Callable[[PlanRequest], Plan]
+#: The planner used unless one is named: time-optimal with exact per-axis coupling.
+DEFAULT_PLANNER = "topp"
 _PLANNERS: dict[str, Planner] = {}
 
 

@@ -27,14 +27,18 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.spans import SpanKind
-from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, interval_counts
-from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, junctions
+from jaxcnc.errors import PlanningError
+from jaxcnc.geometry.spans import SpanKind, Spans
+from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, frames_at, interval_counts
+from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, junctions
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
 from jaxcnc.planners.trapezoid import bucket_size
 
+#: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
+MAX_REFINE = 6
+REFINE_FACTOR = 4
 #: Stand-in for an infinite limit (absent axis) that keeps the eliminations free of inf - inf.
 BIG = 1e30
 
@@ -43,11 +47,7 @@ def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndar
     """``(m,)`` cap on ``x = v²`` at nodes with frame ``t``, ``k`` ``(m, 3)``: axis speeds, feed, chord error."""
     comp = jnp.abs(t)
     x_axis = jnp.min(jnp.where(comp > 0, (v_max / jnp.where(comp > 0, comp, 1.0)) ** 2, jnp.inf), axis=1)
-    kappa = jnp.linalg.norm(k, axis=1)
-    bent = kappa > 0
-    k_safe = jnp.where(bent, kappa, 1.0)
-    cos_half = jnp.clip(1.0 - chord_tol_mm * k_safe, -1.0, 1.0)
-    v_chord = jnp.where(bent, 2.0 * jnp.arccos(cos_half) / k_safe * tick_hz, jnp.inf)
+    v_chord = chord_speed(jnp.linalg.norm(k, axis=1), chord_tol_mm, tick_hz)
     return jnp.minimum(jnp.minimum(x_axis, feed**2), v_chord**2)
 
 
@@ -85,26 +85,82 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
     x_cap = jnp.where(curved, jnp.maximum(x0, x1), jnp.minimum(vcap_a, vcap_b))
     a_seg = jnp.where(curved, jnp.abs(x1 - x0) / two_d, a_line)
     prof = trapezoids(x_node, x_cap, a_seg, delta, g["dwell"])
-    return align_to_ticks(prof, x0 == 0.0, tick_hz)
+    out = align_to_ticks(prof, x0 == 0.0, tick_hz)
+    out["x_node"], out["acc"] = x_node, acc
+    return out
 
 
 def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
     return np.pad(a, [(0, n - a.shape[0])] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
 
 
-def request_grid(req: PlanRequest) -> Grid:
-    """The grid a request is planned on (curved spans cut by speed cap and curvature)."""
+def initial_counts(req: PlanRequest) -> np.ndarray:
+    """``(n,)`` grid intervals per span before refinement (curved spans by turning angle)."""
     spans = req.spans
     moving = spans.hi - spans.lo > 1e-12
     v_axes = np.min(np.where(moving, req.v_max[None, :], np.inf), axis=1)
-    return build_grid(spans, interval_counts(spans, np.minimum(req.feed_mm_s, v_axes), req.machine.tick_hz))
+    return interval_counts(spans, np.minimum(req.feed_mm_s, v_axes), req.machine.tick_hz)
+
+
+def interior_excess(spans: Spans, grid: Grid, x_node: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """``(m,)`` bool: on a curved interval the planned acceleration may exceed the budget inside.
+
+    The limit holds at both ends by construction. Inside, ``q̈ = T(s) u + K(s) x(s)`` is
+    evaluated at the midpoint too; the parabola through the three values bounds it (``T``, ``K``
+    vary smoothly and little on an interval), and an interval whose parabola peaks above
+    ``1 - GRID_MARGIN/2`` of the budget is cut finer.
+    """
+    idx = np.flatnonzero(grid.curved & (grid.delta > 0))
+    bad = np.zeros(len(grid), bool)
+    if idx.size == 0:
+        return bad
+    t_m, k_m = frames_at(spans, grid.span[idx], grid.s_start[idx] + grid.delta[idx] / 2)
+    xa, xb = x_node[idx], x_node[idx + 1]
+    u = (xb - xa) / (2.0 * grid.delta[idx])
+    a0 = grid.t_a[idx] * u[:, None] + grid.k_a[idx] * xa[:, None]
+    am = t_m * u[:, None] + k_m * ((xa + xb) / 2)[:, None]
+    a1 = grid.t_b[idx] * u[:, None] + grid.k_b[idx] * xb[:, None]
+    lin, quad = -3.0 * a0 + 4.0 * am - a1, 2.0 * a0 - 4.0 * am + 2.0 * a1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tau = np.clip(np.nan_to_num(-lin / (2.0 * quad), nan=0.0), 0.0, 1.0)
+    peak = np.maximum(np.abs(a0 + lin * tau + quad * tau**2), np.abs(am))
+    # acc already keeps GRID_MARGIN back on curved intervals: the ends sit at most at acc
+    bad[idx] = np.any(peak > acc[idx] * (1.0 - GRID_MARGIN / 2) / (1.0 - GRID_MARGIN), axis=1)
+    return bad
 
 
 @register_planner("topp")
 def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
+    spans = req.spans
+    counts = initial_counts(req)
+    for _ in range(MAX_REFINE):
+        grid = build_grid(spans, counts)
+        out = _solve_grid(req, grid)
+        bad = interior_excess(spans, grid, out["x_node"][: len(grid) + 1], out["acc"][: len(grid)])
+        if not bad.any():
+            break
+        counts = counts * np.where(np.isin(np.arange(len(spans)), grid.span[bad]), REFINE_FACTOR, 1)
+    else:
+        raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
+    m = len(grid)
+    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
+    arrays = {k: np.asarray(out[k][:m]) for k in keys}
+    for v in arrays.values():
+        v.setflags(write=False)
+    return Plan(
+        length=grid.delta,
+        n_ticks=int(out["n_ticks"]),
+        tick_hz=req.machine.tick_hz,
+        span=grid.span,
+        s_start=grid.s_start,
+        **arrays,
+    )
+
+
+def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
+    """Pad the grid to a bucket, run :func:`plan_grid`, return its outputs as NumPy arrays."""
     spans, machine = req.spans, req.machine
-    grid = request_grid(req)
     n, m = len(spans), len(grid)
     mb, nb = bucket_size(m), bucket_size(n + 1)  # room for the padding point span n
     s = grid.span
@@ -137,16 +193,4 @@ def plan_topp(req: PlanRequest) -> Plan:
         machine.tick_hz,
         curved_any=bool(grid.curved.any()),
     )
-    out = jax.device_get(out)
-    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-    arrays = {k: np.asarray(out[k][:m]) for k in keys}
-    for v in arrays.values():
-        v.setflags(write=False)
-    return Plan(
-        length=grid.delta,
-        n_ticks=int(out["n_ticks"]),
-        tick_hz=machine.tick_hz,
-        span=grid.span,
-        s_start=grid.s_start,
-        **arrays,
-    )
+    return {k: np.asarray(v) for k, v in jax.device_get(out).items()}

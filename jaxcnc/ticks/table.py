@@ -17,6 +17,7 @@ from jaxcnc.geometry.spans import SpanKind
 from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter, file_sha256
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
+from jaxcnc.planners.registry import DEFAULT_PLANNER
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.pso import pso_events
 from jaxcnc.ticks.sample import Sampler, TickSampler, quantize
@@ -124,7 +125,9 @@ def table_meta(machine: MachineConfig, source: str, planner: str, total_time_s: 
     }
 
 
-def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = "lookahead") -> Path:
+def write_table(
+    job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = DEFAULT_PLANNER
+) -> Path:
     """Sample ``job`` at its tick rate and write the table file at ``path``.
 
     ``progress``: show a progress bar (``None``: only on a terminal).
