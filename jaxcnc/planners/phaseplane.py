@@ -148,12 +148,12 @@ def solve(
     curved: bool,
 ) -> jnp.ndarray:
     """``(m+1,)`` time-optimal ``x`` at the nodes under the rows (``curved`` static: any ``K ≠ 0``)."""
-    x_static = static_cap(gu, gx, h, cap_a)
     if curved:
+        x_static = static_cap(gu, gx, h, cap_a)
         alpha, beta = backward_pieces(gu, gx, h, delta)
         k = backward_scan(x_static, alpha, beta, x_end)
         return forward_scan(gu, gx, h, delta, k)
-    # Lines only: the rows without the axis rows' x terms reduce to min(B, x + D) in both directions.
-    node_cap = jnp.concatenate([x_static, x_end[None]])
+    # Lines only (gx = 0 on the axis rows): the node caps and min(B, x + D) in both directions.
+    node_cap = jnp.concatenate([cap_a, x_end[None]])
     node_cap = node_cap.at[1:].min(h[:, -2])  # x_b ≤ cap_b
     return lookahead(node_cap, line_reach(gu[:, :-2], h[:, :-2], delta))
