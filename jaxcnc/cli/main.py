@@ -436,6 +436,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
     if args.suite in ("all", "player"):
         run_player_benchmarks(seconds=args.seconds)
+    if args.suite in ("all", "planners"):
+        from jaxcnc.bench_planners import run_planner_benchmarks
+
+        run_planner_benchmarks()
     if args.suite in ("all", "pulsed"):
         from jaxcnc.bench_pulsed import run_pulsed_benchmarks
 
@@ -577,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "geometry", "player", "pulsed"),
+        choices=("all", "plan", "geometry", "player", "planners", "pulsed"),
         help="which benchmarks (default: %(default)s)",
     )
     sp.set_defaults(func=cmd_bench)
