@@ -1,0 +1,138 @@
+"""The time-optimal planner ``topp``, the reference planners and corner blends."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from jaxcnc.bench import random_cubic_nurbs
+from jaxcnc.gcode import parse_gcode
+from jaxcnc.geometry import SpanKind, build_spans
+from jaxcnc.io.curves import curves_program
+from jaxcnc.planners import plan_job, register_planner
+from tests.conftest import make_machine
+from tests.helpers import table_of
+from tests.test_curves import table_of_program
+
+
+def _curve_program(feed: float = 100.0):
+    curve = random_cubic_nurbs(12, seed=3)
+    return curves_program([curve], feed, start=curve[1][0])
+
+
+def test_topp_within_one_percent_of_casadi_and_inside_the_limits(tmp_path):
+    pytest.importorskip("casadi")
+    from jaxcnc.planners.casadi_ref import casadi_planner
+
+    m = make_machine(v=100, a=1000)
+    prog = _curve_program()
+    job, _, meas = table_of_program(prog, m, tmp_path)
+    assert meas.ok, meas.violations[:3]
+    assert max(meas.max_abs_a["x"], meas.max_abs_a["y"]) > 0.98 * 1000  # the limit is used
+    register_planner("test-casadi")(casadi_planner(3000))
+    ref = plan_job(prog, m, "test-casadi").plan.total_time_s
+    assert job.plan.total_time_s == pytest.approx(ref, rel=0.01)
+    assert job.plan.total_time_s < plan_job(prog, m, "lookahead").plan.total_time_s
+
+
+def test_toppra_agrees_on_a_fine_grid_and_overshoots_on_a_coarse_one(tmp_path):
+    pytest.importorskip("toppra")
+    from jaxcnc.planners.toppra_ref import toppra_planner
+
+    m = make_machine(v=100, a=1000)
+    prog = _curve_program()
+    topp = plan_job(prog, m).plan.total_time_s
+    register_planner("test-toppra")(toppra_planner(4000, "interpolation"))
+    assert plan_job(prog, m, "test-toppra").plan.total_time_s == pytest.approx(topp, rel=0.01)
+    register_planner("test-toppra-coarse")(toppra_planner(40, "collocation"))
+    from tests.helpers import write_table
+
+    job = plan_job(prog, m, "test-toppra-coarse")
+    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.ticks.verify import measure_table
+
+    meas = measure_table(TableFile(write_table(job, tmp_path / "c.ticks", progress=False)), m)
+    assert not meas.ok  # limits imposed at grid points only: exceeded in between
+
+
+def test_lines_sequential_scan_equals_associative_scan():
+    import jax.numpy as jnp
+
+    from jaxcnc.planners.phaseplane import constraint_rows, solve
+
+    rng = np.random.default_rng(0)
+    m = 200
+    t = rng.normal(size=(m, 3))
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    delta = rng.uniform(0.01, 2.0, m)
+    acc = np.tile([1000.0, 800.0, 500.0], (m, 1))
+    cap = rng.uniform(0.0, 1e4, m + 1)
+    cap[0] = cap[-1] = 0.0  # at rest at both ends, as every plan is
+    gu, gx, h = constraint_rows(*(jnp.asarray(a) for a in (delta, t, 0 * t, t, 0 * t, acc, cap[1:])))
+    args = (gu, gx, h, jnp.asarray(delta), jnp.asarray(np.minimum(cap[:-1], 1e4)), jnp.zeros(()))
+    np.testing.assert_allclose(np.asarray(solve(*args, True)), np.asarray(solve(*args, False)), rtol=1e-9, atol=1e-6)
+
+
+def _polyline_distance(p: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    d = np.full(len(p), np.inf)
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
+        ab = b - a
+        s = np.clip(((p - a) @ ab) / (ab @ ab), 0.0, 1.0)
+        d = np.minimum(d, np.linalg.norm(p - (a + s[:, None] * ab), axis=1))
+    return d
+
+
+@pytest.mark.parametrize("tol", [0.002, 0.02])
+def test_corner_blends_stay_within_tolerance_and_limits(tmp_path, tol):
+    m = make_machine()
+    pts = np.array([[0, 0], [10, 0], [10, 10], [20, 12], [30, 12.5], [0, 0]], float)
+    moves = "\n".join(f"X{x:g} Y{y:g}" for x, y in pts[1:])
+    text = f"G21 G90 G64 P{tol}\nG1 F3000 " + moves + "\n"
+    job, table, meas = table_of(text, m, tmp_path)
+    assert meas.ok, meas.violations[:3]
+    assert np.any(job.spans.kind == SpanKind.CURVE)  # blended
+    dev = _polyline_distance(table.exact_mm()[:, :2], pts)
+    assert dev.max() <= tol * (1 + 1e-9)
+    assert dev.max() > 0.5 * tol  # the tolerance is used
+    exact, _, _ = table_of(text.replace(f"G64 P{tol}", "G61"), m, tmp_path, "exact.ticks")
+    assert job.plan.total_time_s < exact.plan.total_time_s
+    assert not np.any(exact.spans.kind == SpanKind.CURVE)
+
+
+def test_blends_are_g2_continuous():
+    sp = build_spans(parse_gcode("G64 P0.05\nG1 X10 F600\nX10 Y10\n", "b.ngc"))
+    np.testing.assert_allclose(sp.start[1:], sp.end[:-1], atol=1e-12)
+    np.testing.assert_allclose(sp.tangent_in[1:], sp.tangent_out[:-1], atol=1e-9)
+    from jaxcnc.geometry.evaluate import evaluate
+
+    curve = np.flatnonzero(sp.kind == SpanKind.CURVE)
+    for u in (0.0, 1.0):
+        _, d1, d2 = evaluate(sp.coeffs[curve[[0, -1]]], sp.origin[curve[[0, -1]]], np.full(2, u), 2)
+        cross = np.cross(np.asarray(d1), np.asarray(d2))
+        k = np.linalg.norm(cross, axis=1) / np.linalg.norm(np.asarray(d1), axis=1) ** 3
+        assert k[0 if u == 0 else 1] < 1e-6  # zero curvature where the blend meets a line
+
+
+def test_laser_switch_and_exact_stop_keep_the_corner():
+    text = "G64 P0.05\nM3 S100\nG1 X10 F600\nS50\nX10 Y10\nS50\nG61\nX20 Y10\n"
+    sp = build_spans(parse_gcode(text, "b.ngc"))
+    assert not np.any(sp.kind == SpanKind.CURVE)
+
+
+def test_near_tangent_chain_keeps_speed_where_acceleration_allows(tmp_path):
+    # a 20 mm circle as 600 lines; exact path: each kink is a velocity step within a tick
+    r, n = 20.0, 600
+    ang = np.linspace(0, 2 * np.pi, n + 1)
+    pts = np.c_[r * np.cos(ang), r * np.sin(ang)]
+    moves = "\n".join(f"G1 X{x:.6f} Y{y:.6f}" for x, y in pts[1:])
+    m = make_machine(v=200, a=1000)
+    head = f"G0 X{r} Y0\nF{60 * 200}\n"
+    exact, _, meas = table_of(head + "G61\n" + moves.replace("G1", "G1", 1) + "\n", m, tmp_path, "e.ticks")
+    blended, _, meas_b = table_of(head + "G64 P0.001\n" + moves + "\n", m, tmp_path, "b.ticks")
+    assert meas_b.ok, meas_b.violations[:3]
+    v_circle = math.sqrt(1000 * r)  # centripetal limit on the true circle
+    v_mid = blended.plan.vp[len(blended.plan) // 2]
+    assert v_mid > 0.8 * v_circle
+    assert blended.plan.total_time_s < exact.plan.total_time_s
