@@ -25,6 +25,7 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.evaluate import evaluate_spans
 from jaxcnc.geometry.inverse import span_arrays, u_of_s
 from jaxcnc.geometry.spans import SpanKind, Spans, pad_spans
+from jaxcnc.planners.trapezoid import bucket_size
 
 TICKS_PER_INTERVAL = 4.0
 MAX_TURN_RAD = 0.0175  # 1°
@@ -94,15 +95,18 @@ def path_frame(spans: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndar
     return t, k
 
 
-def _bucket(n: int) -> int:
-    return max(256, 1 << max(0, int(n - 1).bit_length()))
+def device_spans(spans: Spans) -> dict[str, jnp.ndarray]:
+    """The span arrays :func:`frames_at` reads, padded to a bucket (upload once, query often)."""
+    return span_arrays(pad_spans(spans, bucket_size(len(spans))))
 
 
-def frames_at(spans: Spans, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`path_frame` for NumPy queries ``(q,)``, padded to a bucket (few compiled sizes)."""
-    arrays = span_arrays(pad_spans(spans, _bucket(len(spans))))
+def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`path_frame` for NumPy queries ``(q,)``, padded to a bucket (few compiled sizes).
+
+    ``arrays`` comes from :func:`device_spans`.
+    """
     q = span.size
-    m = _bucket(q)
+    m = bucket_size(q)
     which = np.zeros(m, np.int64)
     where = np.zeros(m)
     which[:q], where[:q] = span, s
@@ -110,8 +114,11 @@ def frames_at(spans: Spans, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray
     return np.asarray(t)[:q], np.asarray(k)[:q]
 
 
-def build_grid(spans: Spans, counts: np.ndarray) -> Grid:
-    """Cut ``spans`` into ``counts[k]`` equal intervals each and evaluate the frame at their ends."""
+def build_grid(spans: Spans, counts: np.ndarray, arrays: dict | None = None) -> Grid:
+    """Cut ``spans`` into ``counts[k]`` equal intervals each and evaluate the frame at their ends.
+
+    ``arrays``: :func:`device_spans` of ``spans`` when the caller has them already.
+    """
     n = len(spans)
     span = np.repeat(np.arange(n), counts)
     j = np.arange(span.size) - np.repeat(np.cumsum(counts) - counts, counts)
@@ -127,7 +134,8 @@ def build_grid(spans: Spans, counts: np.ndarray) -> Grid:
     k_b = np.zeros_like(t_b)
     idx = np.flatnonzero(curved)
     if idx.size:
-        t, k = frames_at(spans, np.concatenate([span[idx], span[idx]]), np.concatenate([s_start[idx], s_end[idx]]))
+        arrays = device_spans(spans) if arrays is None else arrays
+        t, k = frames_at(arrays, np.concatenate([span[idx], span[idx]]), np.concatenate([s_start[idx], s_end[idx]]))
         t_a[idx], t_b[idx] = t[: idx.size], t[idx.size :]
         k_a[idx], k_b[idx] = k[: idx.size], k[idx.size :]
     return Grid(span=span, s_start=s_start, delta=delta, t_a=t_a, k_a=k_a, t_b=t_b, k_b=k_b, curved=curved)

@@ -18,7 +18,7 @@ from jaxcnc.geometry.spans import SpanKind
 from jaxcnc.planners.grid import Grid, build_grid
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions
 from jaxcnc.planners.registry import PlanRequest
-from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
 
 #: Grid points of a reference plan unless the request's machine says otherwise.
 DEFAULT_POINTS = 16_000
@@ -94,16 +94,8 @@ def plan_from_nodes(p: RefProblem, x_node: np.ndarray, req: PlanRequest) -> Plan
     prof = trapezoids(
         jnp.asarray(x), jnp.asarray(np.maximum(x0, x1)), jnp.asarray(np.abs(x1 - x0) / two_d), g.delta, dwell
     )
-    out = {k: np.asarray(v) for k, v in align_to_ticks(prof, jnp.asarray(x0 == 0.0), req.machine.tick_hz).items()}
-    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-    return Plan(
-        length=g.delta,
-        n_ticks=int(out["n_ticks"]),
-        tick_hz=req.machine.tick_hz,
-        span=g.span,
-        s_start=g.s_start,
-        **{k: out[k] for k in keys},
-    )
+    out = align_to_ticks(prof, jnp.asarray(x0 == 0.0), req.machine.tick_hz)
+    return plan_from_outputs(out, g.delta, g.span, g.s_start, req.machine.tick_hz)
 
 
 def import_optional(name: str):

@@ -71,6 +71,35 @@ class Plan:
         return np.searchsorted(self.span, np.arange(n_spans), side="left")
 
 
+#: The per-segment outputs of :func:`trapezoids` + :func:`align_to_ticks` that a :class:`Plan` keeps.
+_PROFILE_KEYS = (
+    "v0",
+    "vp",
+    "v1",
+    "a_acc",
+    "a_dec",
+    "t_acc",
+    "t_cru",
+    "t_dec",
+    "group_tick",
+    "offset_ticks",
+    "first_tick",
+)
+
+
+def plan_from_outputs(out: dict, length: np.ndarray, span: np.ndarray, s_start: np.ndarray, tick_hz: float) -> Plan:
+    """A read-only :class:`Plan` from the (possibly padded) outputs of :func:`align_to_ticks`.
+
+    ``length``, ``span``, ``s_start`` ``(n_segments,)`` describe the segments; ``out`` rows past
+    ``n_segments`` (bucket padding) are dropped.
+    """
+    n = length.shape[0]
+    arrays = {k: np.asarray(out[k][:n]) for k in _PROFILE_KEYS}
+    for v in arrays.values():
+        v.setflags(write=False)
+    return Plan(length=length, n_ticks=int(out["n_ticks"]), tick_hz=tick_hz, span=span, s_start=s_start, **arrays)
+
+
 def _safe_div(num: jnp.ndarray, den: jnp.ndarray) -> jnp.ndarray:
     ok = den > 0
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)

@@ -28,13 +28,13 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.errors import PlanningError
-from jaxcnc.geometry.spans import SpanKind, Spans
-from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, frames_at, interval_counts
+from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
 from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, junctions
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
 from jaxcnc.planners.registry import PlanRequest, register_planner
-from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
-from jaxcnc.planners.trapezoid import bucket_size
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
+from jaxcnc.planners.trapezoid import MOVING_MM, bucket_size, pad_rows
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -90,31 +90,27 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
     return out
 
 
-def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
-    return np.pad(a, [(0, n - a.shape[0])] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
-
-
 def initial_counts(req: PlanRequest) -> np.ndarray:
     """``(n,)`` grid intervals per span before refinement (curved spans by turning angle)."""
     spans = req.spans
-    moving = spans.hi - spans.lo > 1e-12
+    moving = spans.hi - spans.lo > MOVING_MM
     v_axes = np.min(np.where(moving, req.v_max[None, :], np.inf), axis=1)
     return interval_counts(spans, np.minimum(req.feed_mm_s, v_axes), req.machine.tick_hz)
 
 
-def interior_excess(spans: Spans, grid: Grid, x_node: np.ndarray, acc: np.ndarray) -> np.ndarray:
+def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """``(m,)`` bool: on a curved interval the planned acceleration may exceed the budget inside.
 
     The limit holds at both ends by construction. Inside, ``q̈ = T(s) u + K(s) x(s)`` is
     evaluated at the midpoint too; the parabola through the three values bounds it (``T``, ``K``
     vary smoothly and little on an interval), and an interval whose parabola peaks above
-    ``1 - GRID_MARGIN/2`` of the budget is cut finer.
+    ``1 - GRID_MARGIN/2`` of the budget is cut finer. ``arrays``: :func:`~jaxcnc.planners.grid.device_spans`.
     """
     idx = np.flatnonzero(grid.curved & (grid.delta > 0))
     bad = np.zeros(len(grid), bool)
     if idx.size == 0:
         return bad
-    t_m, k_m = frames_at(spans, grid.span[idx], grid.s_start[idx] + grid.delta[idx] / 2)
+    t_m, k_m = frames_at(arrays, grid.span[idx], grid.s_start[idx] + grid.delta[idx] / 2)
     xa, xb = x_node[idx], x_node[idx + 1]
     u = (xb - xa) / (2.0 * grid.delta[idx])
     a0 = grid.t_a[idx] * u[:, None] + grid.k_a[idx] * xa[:, None]
@@ -134,28 +130,17 @@ def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
     spans = req.spans
     counts = initial_counts(req)
+    arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all rounds
     for _ in range(MAX_REFINE):
-        grid = build_grid(spans, counts)
+        grid = build_grid(spans, counts, arrays)
         out = _solve_grid(req, grid)
-        bad = interior_excess(spans, grid, out["x_node"][: len(grid) + 1], out["acc"][: len(grid)])
+        bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], out["acc"][: len(grid)])
         if not bad.any():
             break
         counts = counts * np.where(np.isin(np.arange(len(spans)), grid.span[bad]), REFINE_FACTOR, 1)
     else:
         raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
-    m = len(grid)
-    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-    arrays = {k: np.asarray(out[k][:m]) for k in keys}
-    for v in arrays.values():
-        v.setflags(write=False)
-    return Plan(
-        length=grid.delta,
-        n_ticks=int(out["n_ticks"]),
-        tick_hz=req.machine.tick_hz,
-        span=grid.span,
-        s_start=grid.s_start,
-        **arrays,
-    )
+    return plan_from_outputs(out, grid.delta, grid.span, grid.s_start, req.machine.tick_hz)
 
 
 def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
@@ -165,23 +150,23 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
     mb, nb = bucket_size(m), bucket_size(n + 1)  # room for the padding point span n
     s = grid.span
     g = {
-        "span": _pad(s, mb, n - 1),
-        "delta": _pad(grid.delta, mb, 0.0),
-        "t_a": _pad(grid.t_a, mb, 0.0),
-        "k_a": _pad(grid.k_a, mb, 0.0),
-        "t_b": _pad(grid.t_b, mb, 0.0),
-        "k_b": _pad(grid.k_b, mb, 0.0),
-        "curved": _pad(grid.curved, mb, False),
-        "feed": _pad(req.feed_mm_s[s], mb, 0.0),
-        "dwell": _pad(np.where(grid.s_start == 0, req.dwell_s[s], 0.0), mb, 0.0),
+        "span": pad_rows(s, mb, n - 1),
+        "delta": pad_rows(grid.delta, mb, 0.0),
+        "t_a": pad_rows(grid.t_a, mb, 0.0),
+        "k_a": pad_rows(grid.k_a, mb, 0.0),
+        "t_b": pad_rows(grid.t_b, mb, 0.0),
+        "k_b": pad_rows(grid.k_b, mb, 0.0),
+        "curved": pad_rows(grid.curved, mb, False),
+        "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
+        "dwell": pad_rows(np.where(grid.s_start == 0, req.dwell_s[s], 0.0), mb, 0.0),
     }
     # padding intervals sit on a padding point span after the program
     g["span"][m:] = n
     sp = {
-        "kind": _pad(spans.kind, nb, SpanKind.POINT),
-        "tangent_in": _pad(spans.tangent_in, nb, 0.0),
-        "tangent_out": _pad(spans.tangent_out, nb, 0.0),
-        "stop_before": _pad(req.stop_before, nb, True),
+        "kind": pad_rows(spans.kind, nb, SpanKind.POINT),
+        "tangent_in": pad_rows(spans.tangent_in, nb, 0.0),
+        "tangent_out": pad_rows(spans.tangent_out, nb, 0.0),
+        "stop_before": pad_rows(req.stop_before, nb, True),
     }
     keep = 1.0 - NUMERIC_MARGIN
     out = plan_grid(

@@ -17,7 +17,7 @@ from jaxcnc.geometry.spans import SpanKind
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import PlanRequest, register_planner
-from jaxcnc.planners.timelaw import Plan, align_to_ticks, trapezoids
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
 
 MIN_BUCKET = 256
 #: An axis whose extent within a span is below this (mm) does not move there.
@@ -51,7 +51,8 @@ def plan_arrays(
     return out
 
 
-def _pad(a: np.ndarray, n: int, fill) -> np.ndarray:
+def pad_rows(a: np.ndarray, n: int, fill) -> np.ndarray:
+    """``a`` followed by rows of ``fill`` up to ``n`` rows (static shapes for compiled kernels)."""
     pad = [(0, n - a.shape[0])] + [(0, 0)] * (a.ndim - 1)
     return np.pad(a, pad, constant_values=fill)
 
@@ -63,15 +64,15 @@ def plan_lookahead(req: PlanRequest) -> Plan:
     n = len(spans)
     m = bucket_size(n)
     args = (
-        _pad(spans.kind, m, SpanKind.POINT),
-        _pad(spans.length, m, 0.0),
-        _pad(spans.kappa_max, m, 0.0),
-        _pad(spans.hi - spans.lo > MOVING_MM, m, False),
-        _pad(spans.tangent_in, m, 0.0),
-        _pad(spans.tangent_out, m, 0.0),
-        _pad(req.feed_mm_s, m, 0.0),
-        _pad(req.dwell_s, m, 0.0),
-        _pad(req.stop_before, m, True),
+        pad_rows(spans.kind, m, SpanKind.POINT),
+        pad_rows(spans.length, m, 0.0),
+        pad_rows(spans.kappa_max, m, 0.0),
+        pad_rows(spans.hi - spans.lo > MOVING_MM, m, False),
+        pad_rows(spans.tangent_in, m, 0.0),
+        pad_rows(spans.tangent_out, m, 0.0),
+        pad_rows(req.feed_mm_s, m, 0.0),
+        pad_rows(req.dwell_s, m, 0.0),
+        pad_rows(req.stop_before, m, True),
     )
     keep = 1.0 - NUMERIC_MARGIN
     out = plan_arrays(
@@ -81,16 +82,4 @@ def plan_lookahead(req: PlanRequest) -> Plan:
         machine.path.chord_tol_mm,
         machine.tick_hz,
     )
-    out = jax.device_get(out)
-    keys = ("v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-    arrays = {k: np.asarray(out[k][:n]) for k in keys}
-    for v in arrays.values():
-        v.setflags(write=False)
-    return Plan(
-        length=spans.length,
-        n_ticks=int(out["n_ticks"]),
-        tick_hz=machine.tick_hz,
-        span=np.arange(n),
-        s_start=np.zeros(n),
-        **arrays,
-    )
+    return plan_from_outputs(jax.device_get(out), spans.length, np.arange(n), np.zeros(n), machine.tick_hz)
