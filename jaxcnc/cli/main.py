@@ -322,7 +322,11 @@ def cmd_play(args: argparse.Namespace) -> int:
     from jaxcnc.hw.tablefile import TableFile
 
     table = TableFile(args.table)  # refuses a damaged file before anything moves
-    options = {"record": args.record, "realtime": args.realtime} if args.sink == "sim" else {}
+    options: dict = {}
+    if args.sink == "sim":
+        options = {"record": args.record, "realtime": args.realtime}
+    elif args.sink in ("halstreamer", "hal"):
+        options = {"record": args.record}
     sink = open_sink(args.sink, **options)
     bar = tqdm(total=table.n_rows, unit="tick", unit_scale=True, desc="playing", disable=args.quiet or None)
     last = [0]
@@ -354,6 +358,8 @@ def cmd_play(args: argparse.Namespace) -> int:
         )
         if args.record:
             print(f"  recorded drive positions -> {args.record}")
+        if getattr(sink, "underruns", 0):
+            print(f"  warning: the sink's buffer ran empty {sink.underruns} times (the player fell behind)")
     if result.stopped:
         print(
             f"jaxcnc: stopped: controlled stop, the drives came to rest on the path at tick {result.executed_tick}",
@@ -512,9 +518,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--sink",
         default="sim",
         help="where to play: sim (in-process virtual drives), scanner (command-list board emulation), "
+        "halstreamer (LinuxCNC's HAL streamer in a servo thread at the tick rate; needs linuxcnc-uspace), "
         "tcp://HOST:PORT or udp://HOST:PORT (the stream protocol; see python -m jaxcnc.hw.receiver)",
     )
-    sp.add_argument("--record", help="sim: save the executed drive positions to this .npy file")
+    sp.add_argument(
+        "--record", help="sim, halstreamer: save the executed drive positions (halstreamer: as sampled) to this .npy"
+    )
     sp.add_argument("--realtime", action="store_true", help="sim: run the virtual clock in wall-clock time")
     sp.add_argument(
         "--machine",

@@ -8,13 +8,17 @@ from jaxcnc.hw.sinks.sim import SimSink
 
 
 def open_sink(spec: str, **options) -> Sink:
-    """The sink named by ``spec`` (``sim``, ``scanner``, ``tcp://HOST:PORT``, ``udp://HOST:PORT``)."""
+    """The sink named by ``spec`` (``sim``, ``scanner``, ``halstreamer``, ``tcp://HOST:PORT``, ``udp://HOST:PORT``)."""
     if spec == "sim":
         return SimSink(**options)
     if spec == "scanner":
         from jaxcnc.hw.sinks.scanner import ScannerSink
 
         return ScannerSink(**options)
+    if spec in ("halstreamer", "hal"):
+        from jaxcnc.hw.sinks.hal import HalStreamerSink
+
+        return HalStreamerSink(**options)
     if spec.startswith(("tcp://", "udp://")):
         from jaxcnc.hw.sinks.stream import StreamSink
 
@@ -23,7 +27,7 @@ def open_sink(spec: str, **options) -> Sink:
         except ValueError as exc:
             raise JaxcncError(str(exc)) from None
     raise JaxcncError(
-        f"unknown or not yet supported sink {spec!r}; available: sim, scanner, tcp://HOST:PORT, udp://HOST:PORT"
+        f"unknown or not yet supported sink {spec!r}; available: sim, scanner, halstreamer, tcp://HOST:PORT, udp://HOST:PORT"
     )
 
 

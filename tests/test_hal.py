@@ -1,0 +1,54 @@
+"""Playing a table through a real LinuxCNC HAL: halstreamer → streamer → sampler → halsampler.
+
+Skipped where LinuxCNC (``linuxcnc-uspace``) is not installed; ``.ci/run`` installs it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jaxcnc.hw.player import play
+from jaxcnc.hw.sinks import open_sink
+from jaxcnc.hw.sinks.hal import HalStreamerSink, hal_available
+from jaxcnc.hw.tablefile import EventKind
+from tests.conftest import make_machine
+from tests.helpers import table_of
+
+pytestmark = pytest.mark.skipif(hal_available() is not None, reason=str(hal_available()))
+
+# a square with the laser on, then a rapid back: ~2.3 s of motion at 10 kHz (23k ticks)
+PROGRAM = "G1 X10 F1200 M3 S500\nY10\nX0\nY0\nM5\nG0 X5 Y5\nM2\n"
+
+
+def test_table_played_through_linuxcnc_comes_back_tick_for_tick(tmp_path):
+    m = make_machine()
+    _, table, _ = table_of(PROGRAM, m, tmp_path)
+    assert table.n_rows > 10_000
+    sink = HalStreamerSink(depth=4096, keep=True)
+    result = play(table, sink)
+    assert result.executed_tick == table.n_rows - 1
+    np.testing.assert_array_equal(sink.recorded, table.positions)  # every tick, exactly
+    # the laser column follows the table's LASER events
+    laser = table.events[table.events["kind"] == EventKind.LASER]
+    on, off = int(laser["tick"][0]), int(laser["tick"][-1])
+    assert laser["value"][0] > 0 and laser["value"][-1] == 0
+    assert np.all(sink.laser_power[on:off] == laser["value"][0]) and np.all(sink.laser_power[off:] == 0)
+    assert np.all(sink.laser_power[:on] == 0)
+    assert sink.underruns >= 0
+
+
+def test_hal_sink_by_name_and_a_second_session_is_refused(tmp_path):
+    m = make_machine()
+    _, table, _ = table_of("G1 X1 F600\nM2\n", m, tmp_path)
+    first = open_sink("halstreamer", keep=True)
+    first.open(table.header)
+    try:
+        with pytest.raises(Exception, match="already running"):
+            HalStreamerSink().open(table.header)
+    finally:
+        first.close()
+    # the session ended cleanly: a new one starts and plays
+    sink = open_sink("hal", keep=True)
+    play(table, sink)
+    np.testing.assert_array_equal(sink.recorded, table.positions)
