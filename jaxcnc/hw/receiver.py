@@ -8,8 +8,11 @@ row at its tick, and when the job is done prints one JSON line of statistics and
 is executed exactly once and in order: a row is taken only when it is the next one needed.
 
 Clock: execution starts when the buffer is half full (double buffering) or the job's last row has
-arrived. If the buffer runs dry before the end (an underrun: a slow player or a lost link), the
-drives hold the last position and the clock waits until the buffer is half full again.
+arrived. If the buffer runs low before the end (a slow player or a lost link) the drives ramp down
+along the path within ``--a-max`` and wait at rest until the buffer is half full again, then ramp
+back up (:class:`~jaxcnc.hw.drives.DriveClock`); without ``--a-max`` they can only hold the last row.
+The summary counts ``underruns`` (ramp-downs), ``hard_stops`` (stops the reserve could not ramp)
+and ``held_ticks``.
 """
 
 from __future__ import annotations
@@ -20,10 +23,10 @@ import select
 import socket
 import sys
 import time
-from collections import deque
 
 import numpy as np
 
+from jaxcnc.hw.drives import DriveClock
 from jaxcnc.hw.stream import (
     ACK,
     DATA,
@@ -40,21 +43,32 @@ from jaxcnc.hw.stream import (
 
 
 class Receiver:
-    def __init__(self, capacity: int = 8192, speed: float = 1.0, record: str | None = None):
-        self.capacity, self.speed, self.record_path = capacity, speed, record
+    """The controller model. ``a_max``: per-axis limits in discretes/s² (enables ramp-downs)."""
+
+    def __init__(
+        self, capacity: int = 8192, speed: float = 1.0, record: str | None = None, a_max: np.ndarray | None = None
+    ):
+        self.capacity, self.speed, self.record_path, self.a_max = capacity, speed, record, a_max
         self.next_tick = 0
-        self.executed = -1
-        self.buffer: deque[np.ndarray] = deque()
-        self.queued = 0
         self.n_rows: int | None = None
         self.n_axes = 0
         self.tick_hz = 1.0
         self.ended = False
         self.running = False
         self.t0 = 0.0
-        self.tick0 = 0
-        self.stats = {"frames": 0, "duplicates": 0, "gaps": 0, "bad_frames": 0, "underruns": 0, "reconnects": 0}
+        self.servo0 = 0  # servo ticks run before the clock (re)started
+        self.servo = 0  # servo ticks run
+        self.clock: DriveClock | None = None
+        self.stats = {"frames": 0, "duplicates": 0, "gaps": 0, "bad_frames": 0, "reconnects": 0}
         self.recorded = None
+
+    @property
+    def executed(self) -> int:
+        return self.clock.executed if self.clock is not None else -1
+
+    @property
+    def queued(self) -> int:
+        return self.clock.queued if self.clock is not None else 0
 
     @property
     def done(self) -> bool:
@@ -64,13 +78,16 @@ class Receiver:
         return self.capacity - self.queued
 
     def reply(self, typ: int) -> Frame:
-        return Frame(typ, self.n_axes, 0, self.next_tick, self.free(), self.executed)
+        underruns = self.clock.underruns if self.clock is not None else 0
+        return Frame(typ, self.n_axes, underruns, self.next_tick, self.free(), self.executed)
 
     def on_frame(self, f: Frame) -> Frame:
         self.stats["frames"] += 1
         if f.type == HELLO:
             if self.n_rows is None:
                 self.n_rows, self.n_axes, self.tick_hz = f.count, f.n_axes, f.aux / 1000.0
+                reserve = self.capacity // 4
+                self.clock = DriveClock(self.n_axes, self.tick_hz, self.a_max, reserve, self.capacity // 2)
                 if self.record_path:
                     self.recorded = np.lib.format.open_memmap(
                         self.record_path, mode="w+", dtype=np.int32, shape=(self.n_rows, self.n_axes)
@@ -80,8 +97,7 @@ class Receiver:
             return self.reply(WELCOME)
         if f.type == DATA:
             if f.tick == self.next_tick and f.count <= self.free() and f.n_axes == self.n_axes:
-                self.buffer.append(np.array(f.rows))
-                self.queued += f.count
+                self.clock.push(np.array(f.rows))
                 self.next_tick += f.count
             elif f.tick < self.next_tick:
                 self.stats["duplicates"] += 1
@@ -93,35 +109,29 @@ class Receiver:
         return self.reply(DONE if self.done else ACK)
 
     def run_clock(self, now: float) -> None:
-        """Execute the rows that are due; start, hold or resume the clock."""
-        if self.n_rows is None or self.done:
+        """Run the servo ticks that are due: rows are taken (or ramped down on) by the drive clock."""
+        if self.clock is None or self.done:
             return
-        all_in = self.next_tick >= self.n_rows
+        all_in = self.ended or self.next_tick >= self.n_rows
         if not self.running:
-            if self.queued >= self.capacity // 2 or (all_in and self.queued) or (self.ended and self.queued):
-                self.running, self.t0, self.tick0 = True, now, self.executed + 1
+            if self.queued >= self.capacity // 2 or (all_in and self.queued):
+                self.running, self.t0, self.servo0 = True, now, self.servo
             return
-        due = self.tick0 + int((now - self.t0) * self.tick_hz * self.speed)
-        while self.executed < due and self.queued:
-            head = self.buffer[0]
-            take = min(len(head), due - self.executed)
-            first = self.executed + 1
-            if self.recorded is not None:
-                self.recorded[first : first + take] = head[:take]
-            self.executed += take
-            self.queued -= take
-            if take == len(head):
-                self.buffer.popleft()
-            else:
-                self.buffer[0] = head[take:]
-        if self.executed < due and not self.queued and not self.done:
-            self.stats["underruns"] += 1  # the drives hold the last position; the clock waits
-            self.running = False
+        due = self.servo0 + int((now - self.t0) * self.tick_hz * self.speed) - self.servo
+        if due <= 0:
+            return
+        first = self.executed + 1
+        taken, _ = self.clock.run(due, all_in)
+        self.servo += due
+        if self.recorded is not None and taken.shape[0]:
+            self.recorded[first : first + taken.shape[0]] = taken
 
     def summary(self) -> dict:
         if self.recorded is not None:
             self.recorded.flush()
-        return {"executed": self.executed + 1, "n_rows": self.n_rows, **self.stats}
+        c = self.clock
+        drives = {"underruns": c.underruns, "hard_stops": c.hard_stops, "held_ticks": c.held_ticks} if c else {}
+        return {"executed": self.executed + 1, "n_rows": self.n_rows, **self.stats, **drives}
 
 
 def serve(spec: str, receiver: Receiver, idle_timeout: float = 30.0, out=sys.stdout) -> dict:
@@ -199,8 +209,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--capacity", type=int, default=8192, help="buffer rows (default: %(default)s)")
     ap.add_argument("--speed", type=float, default=1.0, help="clock speed-up over the table's tick rate")
     ap.add_argument("--idle-timeout", type=float, default=30.0, help="give up after this many silent seconds")
+    ap.add_argument(
+        "--a-max",
+        help="the drives' acceleration limits, discretes/s² per axis in table order (comma-separated): on "
+        "underrun the drives ramp down along the path within them; without, they hold the last row",
+    )
     args = ap.parse_args(argv)
-    stats = serve(args.listen, Receiver(args.capacity, args.speed, args.record), args.idle_timeout)
+    a_max = np.array([float(x) for x in args.a_max.split(",")]) if args.a_max else None
+    stats = serve(args.listen, Receiver(args.capacity, args.speed, args.record, a_max), args.idle_timeout)
     print(json.dumps(stats), flush=True)
     return 0
 

@@ -2,8 +2,11 @@
 
 The simulated controller has a FIFO of ``buffer_rows`` rows and a clock at the table's tick
 rate. ``wait`` advances the clock: by default virtually (instantly), with ``realtime=True`` in
-wall-clock time. Executed rows are recorded (in memory for small tables, into a ``.npy`` file when
-asked) together with the events, and always summarised by a running CRC-32, so a table of any
+wall-clock time — then a player that falls behind makes the buffer run low, and the drives ramp down
+along the path within ``a_max`` and wait (:class:`~jaxcnc.hw.drives.DriveClock`); ``underruns``
+counts those stops and, with ``trace=True``, ``trace`` holds the drives' position at every tick.
+Executed rows are recorded (in memory for small tables, into a ``.npy`` file when asked) together
+with the events, and always summarised by a running CRC-32, so a table of any
 length plays in bounded memory and tests can compare what the drives did with the file.
 """
 
@@ -11,11 +14,11 @@ from __future__ import annotations
 
 import time
 import zlib
-from collections import deque
 from pathlib import Path
 
 import numpy as np
 
+from jaxcnc.hw.drives import DriveClock
 from jaxcnc.hw.tablefile import EVENT_DTYPE, TableHeader
 
 
@@ -28,17 +31,22 @@ class SimSink:
         record: str | Path | None = None,
         realtime: bool = False,
         keep: bool | None = None,
+        a_max: np.ndarray | None = None,
+        trace: bool = False,
     ):
         self.buffer_rows, self.realtime, self.keep = buffer_rows, realtime, keep
+        self.a_max_mm = None if a_max is None else np.asarray(a_max, dtype=np.float64)
         self.record_path = Path(record) if record else None
-        self._fifo: deque[np.ndarray] = deque()
-        self._queued = 0
-        self._next_tick = 0  # next tick the drives will execute
         self._expected = 0  # next tick the player must send
         self.recorded: np.ndarray | None = None
         self.events: list[np.ndarray] = []
-        self.underruns = 0
+        self.trace: list[np.ndarray] | None = [] if trace else None
         self.crc = 0  # CRC-32 of every executed row's bytes, in order (verification without storing)
+        self._servo = 0  # servo ticks run
+
+    @property
+    def underruns(self) -> int:
+        return self.clock.underruns
 
     def open(self, header: TableHeader) -> None:
         self.header = header
@@ -49,55 +57,57 @@ class SimSink:
             self.recorded = np.empty(shape, np.int32)  # small tables are kept in memory
         else:
             self.recorded = None  # long tables: only the CRC of what was executed (bounded memory)
+        a_max = None if self.a_max_mm is None else self.a_max_mm / header.discrete_mm
+        self.clock = DriveClock(header.n_axes, header.tick_hz, a_max, self.buffer_rows // 4, self.buffer_rows // 2)
         self._t0 = time.perf_counter()
 
     def free_rows(self) -> int:
-        return self.buffer_rows - self._queued
+        return self.buffer_rows - self.clock.queued
 
     def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray) -> None:
         if first_tick != self._expected:
             raise RuntimeError(f"sim sink: expected tick {self._expected}, got {first_tick}")
         if rows.shape[0] > self.free_rows():
             raise RuntimeError("sim sink: buffer overflow (the player ignored flow control)")
-        self._fifo.append(np.array(rows, dtype=np.int32))
-        self._queued += rows.shape[0]
+        self.clock.push(rows)
         self._expected += rows.shape[0]
         if events.size:
             self.events.append(np.asarray(events, EVENT_DTYPE))
 
-    def _execute(self, n: int) -> None:
-        """The drives take ``n`` rows from the FIFO (one per tick)."""
-        while n > 0 and self._fifo:
-            head = self._fifo[0]
-            take = min(n, head.shape[0])
-            if self.recorded is not None:
-                self.recorded[self._next_tick : self._next_tick + take] = head[:take]
-            self.crc = zlib.crc32(np.ascontiguousarray(head[:take], dtype="<i4").tobytes(), self.crc)
-            self._next_tick += take
-            self._queued -= take
-            n -= take
-            if take == head.shape[0]:
-                self._fifo.popleft()
-            else:
-                self._fifo[0] = head[take:]
-        if n > 0 and self._next_tick < self.header.n_rows:
-            self.underruns += 1
+    def _execute(self, n: int, ended: bool = False) -> None:
+        """Run the drives' clock ``n`` servo ticks."""
+        first = self.clock.executed + 1
+        taken, pos = self.clock.run(n, ended or self._expected >= self.header.n_rows)
+        self._servo += n
+        if self.recorded is not None and taken.shape[0]:
+            self.recorded[first : first + taken.shape[0]] = taken
+        self.crc = zlib.crc32(np.ascontiguousarray(taken, dtype="<i4").tobytes(), self.crc)
+        if self.trace is not None:
+            self.trace.append(pos)
+
+    def _sleep_until(self, servo_tick: int) -> None:
+        if self.realtime:
+            time.sleep(max(0.0, self._t0 + servo_tick / self.header.tick_hz - time.perf_counter()))
 
     def wait(self) -> None:
-        # Run the clock until half the buffer is free (double buffering).
-        n = max(1, self._queued - self.buffer_rows // 2)
         if self.realtime:
-            due = self._t0 + (self._next_tick + n) / self.header.tick_hz
-            time.sleep(max(0.0, due - time.perf_counter()))
-        self._execute(n)
+            # the clock runs by itself: execute the ticks that are due (at least one)
+            due = int((time.perf_counter() - self._t0) * self.header.tick_hz) - self._servo
+            if due <= 0:
+                self._sleep_until(self._servo + 1)
+                due = 1
+            self._execute(due)
+        else:
+            # virtual clock: run until half the buffer is free (double buffering)
+            self._execute(max(1, self.clock.queued - self.buffer_rows // 2))
 
     def executed_tick(self) -> int:
-        return self._next_tick - 1
+        return self.clock.executed
 
     def close(self) -> None:
-        if self.realtime:
-            due = self._t0 + (self._next_tick + self._queued) / self.header.tick_hz
-            time.sleep(max(0.0, due - time.perf_counter()))
-        self._execute(self._queued)
+        while self.clock.queued:  # the rest of the buffer (after a ramp-down, ramping up first)
+            left = self.clock.queued
+            self._sleep_until(self._servo + left)
+            self._execute(left, ended=True)
         if self.record_path is not None and self.recorded is not None:
             self.recorded.flush()

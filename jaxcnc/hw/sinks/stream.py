@@ -58,6 +58,7 @@ class StreamSink:
         self.credit = 0
         self.executed = -1
         self.seq = 0
+        self.underruns = 0
         self.data_sent = 0
         self.held: Frame | None = None
         self.done = False
@@ -161,6 +162,7 @@ class StreamSink:
         if f.tick >= self.acked:
             self.acked, self.credit = f.tick, f.count
         self.executed = max(self.executed, f.aux)
+        self.underruns = max(self.underruns, f.seq)  # the board's ramp-downs for want of rows
         self.done = self.done or f.type == DONE
         while self.retained:
             first, frame = next(iter(self.retained.items()))
