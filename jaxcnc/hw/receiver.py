@@ -27,6 +27,7 @@ import time
 import numpy as np
 
 from jaxcnc.hw.drives import DriveClock
+from jaxcnc.hw.sinks.record import RowRecorder
 from jaxcnc.hw.stream import (
     ACK,
     DATA,
@@ -60,7 +61,7 @@ class Receiver:
         self.servo = 0  # servo ticks run
         self.clock: DriveClock | None = None
         self.stats = {"frames": 0, "duplicates": 0, "gaps": 0, "bad_frames": 0, "reconnects": 0}
-        self.recorded = None
+        self.recorder: RowRecorder | None = None
 
     @property
     def executed(self) -> int:
@@ -72,7 +73,7 @@ class Receiver:
 
     @property
     def done(self) -> bool:
-        return self.n_rows is not None and self.executed == self.n_rows - 1
+        return self.ended and self.executed == self.n_rows - 1
 
     def free(self) -> int:
         return self.capacity - self.queued
@@ -88,10 +89,7 @@ class Receiver:
                 self.n_rows, self.n_axes, self.tick_hz = f.count, f.n_axes, f.aux / 1000.0
                 reserve = self.capacity // 4
                 self.clock = DriveClock(self.n_axes, self.tick_hz, self.a_max, reserve, self.capacity // 2)
-                if self.record_path:
-                    self.recorded = np.lib.format.open_memmap(
-                        self.record_path, mode="w+", dtype=np.int32, shape=(self.n_rows, self.n_axes)
-                    )
+                self.recorder = RowRecorder(self.n_axes, self.record_path)
             else:
                 self.stats["reconnects"] += 1
             return self.reply(WELCOME)
@@ -106,13 +104,14 @@ class Receiver:
             return self.reply(ACK)
         if f.type == END:
             self.ended = True
+            self.n_rows = f.tick  # the job's true length (a hold or an override plays more rows than HELLO said)
         return self.reply(DONE if self.done else ACK)
 
     def run_clock(self, now: float) -> None:
         """Run the servo ticks that are due: rows are taken (or ramped down on) by the drive clock."""
         if self.clock is None or self.done:
             return
-        all_in = self.ended or self.next_tick >= self.n_rows
+        all_in = self.ended and self.next_tick >= self.n_rows  # END told the job's length: every row is in
         if not self.running:
             if self.queued >= self.capacity // 2 or (all_in and self.queued):
                 self.running, self.t0, self.servo0 = True, now, self.servo
@@ -120,15 +119,13 @@ class Receiver:
         due = self.servo0 + int((now - self.t0) * self.tick_hz * self.speed) - self.servo
         if due <= 0:
             return
-        first = self.executed + 1
         taken, _ = self.clock.run(due, all_in)
         self.servo += due
-        if self.recorded is not None and taken.shape[0]:
-            self.recorded[first : first + taken.shape[0]] = taken
+        self.recorder.append(taken)
 
     def summary(self) -> dict:
-        if self.recorded is not None:
-            self.recorded.flush()
+        if self.recorder is not None:
+            self.recorder.close()
         c = self.clock
         drives = {"underruns": c.underruns, "hard_stops": c.hard_stops, "held_ticks": c.held_ticks} if c else {}
         return {"executed": self.executed + 1, "n_rows": self.n_rows, **self.stats, **drives}

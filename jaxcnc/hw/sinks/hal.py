@@ -34,12 +34,12 @@ import subprocess
 import tempfile
 import threading
 import time
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 from jaxcnc.errors import JaxcncError
+from jaxcnc.hw.sinks.record import RowRecorder
 from jaxcnc.hw.tablefile import EventKind, TableHeader
 
 REALTIME = "/usr/lib/linuxcnc/realtime"
@@ -114,8 +114,7 @@ class HalStreamerSink:
         self.depth, self.period_ns, self.keep, self.timeout_s = depth, period_ns, keep, timeout_s
         self.record_path = Path(record) if record else None
         self.recorded: np.ndarray | None = None
-        self.laser_power: np.ndarray | None = None
-        self.crc = 0
+        self.laser_power: np.ndarray | None = None  # after close: the laser column as sampled (if kept)
         self.underruns = 0  # ticks the streamer found its FIFO empty between the first and the last row
         self._sent = 0
         self._executed = 0
@@ -185,13 +184,9 @@ class HalStreamerSink:
             cfg = Path(self._tmp) / "jaxcnc.hal"
             cfg.write_text(hal_config(n, self.depth, period))
             self._halcmd("-f", str(cfg))
-            shape = (header.n_rows, n)
-            if self.record_path is not None:
-                self.recorded = np.lib.format.open_memmap(self.record_path, mode="w+", dtype=np.int32, shape=shape)
-            elif self.keep or (self.keep is None and header.n_rows * n * 4 <= 256 << 20):
-                self.recorded = np.empty(shape, np.int32)
-            if self.recorded is not None:
-                self.laser_power = np.empty(header.n_rows, np.float64)
+            keep = self.keep or (self.keep is None and header.n_rows * n * 4 <= 256 << 20)
+            self._rec = RowRecorder(n, self.record_path, keep=keep)
+            self._laser_rows: list[np.ndarray] | None = [] if keep else None
             # stdbuf: halsampler's stdout is a pipe; line buffering makes every executed tick come back at once
             sampler = (
                 ["stdbuf", "-oL", "halsampler", "-c", "0"] if shutil.which("stdbuf") else ["halsampler", "-c", "0"]
@@ -227,17 +222,15 @@ class HalStreamerSink:
                     self._error = f"halsampler returned a malformed line near tick {self._executed}"
                     self._cond.notify_all()
                 return
-            pos = vals[:, :-2].astype(np.int32)
             k, m = self._executed, vals.shape[0]
-            if k + m > self.header.n_rows:
+            if k + m > self._sent:
                 with self._cond:
-                    self._error = f"HAL executed {k + m} ticks, more than the {self.header.n_rows} sent"
+                    self._error = f"HAL executed {k + m} ticks, more than the {self._sent} sent"
                     self._cond.notify_all()
                 return
-            if self.recorded is not None:
-                self.recorded[k : k + m] = pos
-                self.laser_power[k : k + m] = vals[:, -2]
-            self.crc = zlib.crc32(np.ascontiguousarray(pos, dtype="<i4").tobytes(), self.crc)
+            self._rec.append(vals[:, :-2].astype(np.int32))
+            if self._laser_rows is not None:
+                self._laser_rows.append(vals[:, -2])
             u = vals[:, -1]
             if self._first_underruns is None:
                 self._first_underruns = int(u[0])
@@ -247,6 +240,11 @@ class HalStreamerSink:
                 self._cond.notify_all()
 
     # ---- the sink protocol ---------------------------------------------------------------------
+    @property
+    def crc(self) -> int:
+        """CRC-32 of the sampled positions, in order."""
+        return self._rec.crc
+
     def free_rows(self) -> int:
         self._check()
         return max(0, self.depth - (self._sent - self._executed))
@@ -328,8 +326,9 @@ class HalStreamerSink:
                     self._start()
                 self._streamer.stdin.close()
                 self._wait_for(self._sent)
-                if self.record_path is not None and self.recorded is not None:
-                    self.recorded.flush()
+                self.recorded = self._rec.close()
+                if self._laser_rows is not None:
+                    self.laser_power = np.concatenate(self._laser_rows) if self._laser_rows else np.zeros(0)
         finally:
             self._shutdown()
 

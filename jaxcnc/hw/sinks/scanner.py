@@ -11,10 +11,9 @@ checked by a running CRC and, for small tables, kept.
 
 from __future__ import annotations
 
-import zlib
-
 import numpy as np
 
+from jaxcnc.hw.sinks.record import RowRecorder
 from jaxcnc.hw.tablefile import TableHeader
 
 
@@ -27,13 +26,15 @@ class ScannerSink:
         self.executed = -1
         self.lists_run = 0
         self.underruns = 0
-        self.crc = 0
-        self.recorded: np.ndarray | None = None
+        self.recorded: np.ndarray | None = None  # after close, for small tables: every executed row
+
+    @property
+    def crc(self) -> int:
+        return self._rec.crc
 
     def open(self, header: TableHeader) -> None:
         self.header = header
-        if header.n_rows * header.n_axes * 4 <= 256 << 20:
-            self.recorded = np.empty((header.n_rows, header.n_axes), np.int32)
+        self._rec = RowRecorder(header.n_axes, keep=header.n_rows * header.n_axes * 4 <= 256 << 20)
 
     def free_rows(self) -> int:
         """Room in the list being loaded (none while a complete list waits for the board)."""
@@ -44,7 +45,7 @@ class ScannerSink:
             raise RuntimeError("scanner sink: list overflow (the player ignored flow control)")
         self.loading.append(np.array(rows, dtype=np.int32))
         self.loaded += rows.shape[0]
-        if self.loaded == self.list_rows or first_tick + rows.shape[0] == self.header.n_rows:
+        if self.loaded == self.list_rows:
             self._close_list()
 
     def _close_list(self) -> None:
@@ -55,10 +56,7 @@ class ScannerSink:
     def _run_list(self) -> None:
         """The board executes the ready list (its own clock; instant in the emulation)."""
         rows, self.ready = self.ready, None
-        first = self.executed + 1
-        if self.recorded is not None:
-            self.recorded[first : first + rows.shape[0]] = rows
-        self.crc = zlib.crc32(np.ascontiguousarray(rows, dtype="<i4").tobytes(), self.crc)
+        self._rec.append(rows)
         self.executed += rows.shape[0]
         self.lists_run += 1
 
@@ -75,3 +73,4 @@ class ScannerSink:
         self._close_list()
         if self.ready is not None:
             self._run_list()
+        self.recorded = self._rec.close()

@@ -13,12 +13,12 @@ length plays in bounded memory and tests can compare what the drives did with th
 from __future__ import annotations
 
 import time
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 from jaxcnc.hw.drives import DriveClock
+from jaxcnc.hw.sinks.record import RowRecorder
 from jaxcnc.hw.tablefile import EVENT_DTYPE, TableHeader
 
 
@@ -38,11 +38,15 @@ class SimSink:
         self.a_max_mm = None if a_max is None else np.asarray(a_max, dtype=np.float64)
         self.record_path = Path(record) if record else None
         self._expected = 0  # next tick the player must send
-        self.recorded: np.ndarray | None = None
+        self.recorded: np.ndarray | None = None  # after close: every executed row, in order (if kept)
         self.events: list[np.ndarray] = []
         self.trace: list[np.ndarray] | None = [] if trace else None
-        self.crc = 0  # CRC-32 of every executed row's bytes, in order (verification without storing)
         self._servo = 0  # servo ticks run
+
+    @property
+    def crc(self) -> int:
+        """CRC-32 of every executed row's bytes, in order (verification without storing)."""
+        return self._rec.crc
 
     @property
     def underruns(self) -> int:
@@ -50,13 +54,8 @@ class SimSink:
 
     def open(self, header: TableHeader) -> None:
         self.header = header
-        shape = (header.n_rows, header.n_axes)
-        if self.record_path is not None:
-            self.recorded = np.lib.format.open_memmap(self.record_path, mode="w+", dtype=np.int32, shape=shape)
-        elif self.keep or (self.keep is None and header.n_rows * header.n_axes * 4 <= 256 << 20):
-            self.recorded = np.empty(shape, np.int32)  # small tables are kept in memory
-        else:
-            self.recorded = None  # long tables: only the CRC of what was executed (bounded memory)
+        small = header.n_rows * header.n_axes * 4 <= 256 << 20  # long tables: only the CRC (bounded memory)
+        self._rec = RowRecorder(header.n_axes, self.record_path, keep=self.keep or (self.keep is None and small))
         a_max = None if self.a_max_mm is None else self.a_max_mm / header.discrete_mm
         self.clock = DriveClock(header.n_axes, header.tick_hz, a_max, self.buffer_rows // 4, self.buffer_rows // 2)
         self._t0 = time.perf_counter()
@@ -76,12 +75,9 @@ class SimSink:
 
     def _execute(self, n: int, ended: bool = False) -> None:
         """Run the drives' clock ``n`` servo ticks."""
-        first = self.clock.executed + 1
-        taken, pos = self.clock.run(n, ended or self._expected >= self.header.n_rows)
+        taken, pos = self.clock.run(n, ended)
         self._servo += n
-        if self.recorded is not None and taken.shape[0]:
-            self.recorded[first : first + taken.shape[0]] = taken
-        self.crc = zlib.crc32(np.ascontiguousarray(taken, dtype="<i4").tobytes(), self.crc)
+        self._rec.append(taken)
         if self.trace is not None:
             self.trace.append(pos)
 
@@ -109,5 +105,4 @@ class SimSink:
             left = self.clock.queued
             self._sleep_until(self._servo + left)
             self._execute(left, ended=True)
-        if self.record_path is not None and self.recorded is not None:
-            self.recorded.flush()
+        self.recorded = self._rec.close()

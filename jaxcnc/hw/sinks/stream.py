@@ -59,6 +59,7 @@ class StreamSink:
         self.executed = -1
         self.seq = 0
         self.underruns = 0
+        self.rows_sent = 0  # the job's rows (more than the table's after a hold or an override)
         self.data_sent = 0
         self.held: Frame | None = None
         self.done = False
@@ -199,6 +200,7 @@ class StreamSink:
             self.seq += 1
             self.retained[first_tick + i] = frame
             self._send(frame)
+        self.rows_sent = max(self.rows_sent, first_tick + rows.shape[0])
 
     def wait(self) -> None:
         """Take acknowledgements; if the receiver's next tick has not advanced for a timeout while
@@ -220,7 +222,7 @@ class StreamSink:
 
     def close(self) -> None:
         """Send END until the receiver reports every row executed."""
-        end = Frame(END, self.header.n_axes, self.seq, self.header.n_rows, 0, 0)
+        end = Frame(END, self.header.n_axes, self.seq, self.rows_sent, 0, 0)
         for _ in range(self.retries * 10):
             if self.done:
                 break
