@@ -10,8 +10,9 @@ import time
 
 import numpy as np
 
-from jaxcnc.hw.player import Player, stop_ramp
+from jaxcnc.hw.player import Player
 from jaxcnc.hw.sinks.sim import SimSink
+from jaxcnc.hw.tablefile import EventKind
 from tests.conftest import machine_text, make_machine
 from tests.helpers import table_of
 
@@ -24,18 +25,43 @@ def _windowed_accel(rows: np.ndarray, q: float, f: float, w: int = 100) -> np.nd
     return np.abs(v[w:] - v[:-w]) * f / w
 
 
-def test_stop_ramp_stays_on_the_path_and_within_limits(tmp_path):
+def test_player_hold_resume_and_override_on_the_path_within_limits(tmp_path):
+    """Feed hold at full speed while playing, a wait, resume at half override: the drives stay on
+    the line, within the acceleration limit, and finish at the table's end; the laser is off at rest."""
     m = make_machine()
-    _, table, _ = table_of(PROGRAM, m, tmp_path)
+    _, table, _ = table_of("G1 X400 F3000 M3 S800\nM5\nM2\n", m, tmp_path)
     a_max = np.array([m.axis(a).a_max for a in table.axes])
-    sent = table.n_rows // 2
-    ramp = stop_ramp(table, a_max, sent)
-    rows = np.vstack([table.positions[:sent], ramp])
-    assert rows.shape[0] < table.n_rows  # stopped before the end
-    assert np.all(rows[:, 1:] == table.positions[0, 1:])  # still on the line (y, z unchanged)
-    assert np.all(np.diff(rows[:, 0]) >= 0)  # never backwards
-    assert np.all(ramp[-1] == ramp[-2])  # at rest
-    assert _windowed_accel(rows[:, 0].astype(float), m.discrete_mm, m.tick_hz).max() <= 1000.0 * 1.02
+    sink = SimSink(buffer_rows=2000, keep=True)
+    player = Player(table, sink, a_max=a_max)
+    held_at = []
+
+    def progress(done: int) -> None:
+        if done > 20_000 and not held_at:
+            player.hold()
+            held_at.append(done)
+        elif held_at and done > held_at[0] + 15_000 and player.commanded_rate == 0.0:
+            player.set_override(0.5)
+            player.resume()
+
+    result = player.run(progress)
+    assert not result.stopped and player.holds == 1
+    rows = sink.recorded
+    assert rows.shape[0] == result.executed_tick + 1 > table.n_rows  # the hold and the half feed took longer
+    np.testing.assert_array_equal(rows[-1], table.positions[-1])  # the same final position
+    assert np.all(rows[:, 1:] == table.positions[0, 1:])  # on the line (y, z unchanged)
+    x = rows[:, 0]
+    assert np.all(np.diff(x) >= 0)  # never backwards
+    assert _windowed_accel(x.astype(float), m.discrete_mm, m.tick_hz).max() <= 1000.0 * 1.02
+    still = np.flatnonzero(np.diff(x) == 0)
+    assert still.size > 10_000  # a real wait at rest
+    ev = np.concatenate(sink.events)
+    laser = ev[ev["kind"] == EventKind.LASER]
+    # on at the start, off at rest in the hold, on again before moving, off at M5
+    assert list(laser["value"] > 0) == [True, False, True, False]
+    off, on = int(laser["tick"][1]), int(laser["tick"][2])
+    assert np.all(np.diff(x[off : on + 1]) == 0)  # the laser was off only while at rest
+    v_half = np.diff(x[-30_000:-20_000]).mean() * m.discrete_mm * m.tick_hz
+    assert abs(v_half - 25.0) < 0.5  # the 50 mm/s cruise at 50 % override
 
 
 def test_player_request_stop_from_another_thread(tmp_path):
@@ -70,3 +96,30 @@ def test_ctrl_c_in_jaxcnc_play_is_a_controlled_stop(tmp_path):
     assert np.all(rows[:, 1:] == table.positions[0, 1:])
     assert np.all(rows[-1] == rows[-2]) and np.all(np.diff(rows[:, 0]) >= 0)
     assert _windowed_accel(rows[:, 0].astype(float), m.discrete_mm, m.tick_hz).max() <= 1000.0 * 1.02
+
+
+def test_jaxcnc_play_takes_hold_resume_and_override_from_a_pipe(tmp_path):
+    """Operator controls on the command line: hold at full speed, resume at 50 %, to the end."""
+    machine = tmp_path / "m.toml"
+    machine.write_text(machine_text())
+    m = make_machine()
+    _, table, _ = table_of(PROGRAM, m, tmp_path, "long.ticks")
+    rec = tmp_path / "rec.npy"
+    cmd = [sys.executable, "-m", "jaxcnc.cli.main", "play", str(tmp_path / "long.ticks"), "--sink", "sim"]
+    cmd += ["--realtime", "--record", str(rec), "-m", str(machine)]
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.5)  # start-up, then about a second and a half of motion
+    proc.stdin.write("hold\n")
+    proc.stdin.flush()
+    time.sleep(1.5)
+    proc.stdin.write("override 0.5\nbogus\nresume\n")
+    proc.stdin.flush()
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "feed holds: 1" in out and "unknown control 'bogus'" in err
+    rows = np.load(rec)
+    assert rows.shape[0] > table.n_rows + 10_000  # waited, then went on at half feed
+    np.testing.assert_array_equal(rows[-1], table.positions[-1])
+    assert np.all(rows[:, 1:] == table.positions[0, 1:]) and np.all(np.diff(rows[:, 0]) >= 0)
+    assert _windowed_accel(rows[:, 0].astype(float), m.discrete_mm, m.tick_hz).max() <= 1000.0 * 1.02
+    assert np.sum(np.diff(rows[:, 0]) == 0) > 5_000  # at rest in the hold

@@ -11,6 +11,7 @@ import argparse
 import json
 import sys
 import time
+from contextlib import nullcontext
 from importlib import resources
 from pathlib import Path
 
@@ -317,24 +318,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_play(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
-    from jaxcnc.hw.player import play
+    from jaxcnc.cli.control import KEYS_HELP, operator_controls
+    from jaxcnc.hw.player import Player, sigint_stops
     from jaxcnc.hw.sinks import open_sink
     from jaxcnc.hw.tablefile import TableFile
 
     table = TableFile(args.table)  # refuses a damaged file before anything moves
-    options: dict = {}
-    if args.sink == "sim":
-        options = {"record": args.record, "realtime": args.realtime}
-    elif args.sink in ("halstreamer", "hal"):
-        options = {"record": args.record}
-    sink = open_sink(args.sink, **options)
-    bar = tqdm(total=table.n_rows, unit="tick", unit_scale=True, desc="playing", disable=args.quiet or None)
-    last = [0]
-
-    def progress(done: int) -> None:
-        bar.update(done - last[0])
-        last[0] = done
-
     a_max = None
     if args.machine:
         from jaxcnc.machine import load_machine
@@ -344,8 +333,27 @@ def cmd_play(args: argparse.Namespace) -> int:
         if missing:
             raise JaxcncError(f"{args.machine}: machine {machine.name!r} lacks the table's axes {missing}")
         a_max = np.array([machine.axis(a).a_max for a in table.axes])
+    options: dict = {}
+    if args.sink == "sim":
+        options = {"record": args.record, "realtime": args.realtime, "a_max": a_max}
+    elif args.sink in ("halstreamer", "hal"):
+        options = {"record": args.record}
+    sink = open_sink(args.sink, **options)
+    bar = tqdm(total=table.n_rows, unit="tick", unit_scale=True, desc="playing", disable=args.quiet or None)
+    last = [0]
+
+    def progress(done: int) -> None:
+        bar.update(done - last[0])
+        last[0] = done
+        if a_max is not None:
+            bar.set_postfix_str("HOLD" if player.held else f"feed {player.override:.0%}", refresh=False)
+
+    player = Player(table, sink, a_max=a_max)
     try:
-        result = play(table, sink, progress=progress, a_max=a_max, stop_on_sigint=a_max is not None)
+        with sigint_stops(player), operator_controls(player) if a_max is not None else nullcontext() as keys:
+            if keys:
+                bar.write(KEYS_HELP)
+            result = player.run(progress)
     except ConnectionError as exc:
         bar.close()
         raise JaxcncError(f"{args.sink}: {exc}") from None
@@ -359,14 +367,19 @@ def cmd_play(args: argparse.Namespace) -> int:
         if args.record:
             print(f"  recorded drive positions -> {args.record}")
         if getattr(sink, "underruns", 0):
-            print(f"  warning: the sink's buffer ran empty {sink.underruns} times (the player fell behind)")
+            print(
+                f"  warning: the sink's buffer ran low {sink.underruns} times (the player fell behind); "
+                "the drives ramped down on the path and waited"
+            )
+        if player.holds:
+            print(f"  feed holds: {player.holds}")
     if result.stopped:
         print(
             f"jaxcnc: stopped: controlled stop, the drives came to rest on the path at tick {result.executed_tick}",
             file=sys.stderr,
         )
         return 130
-    return 0 if result.executed_tick + 1 == table.n_rows else 1
+    return 0 if result.executed_tick + 1 == result.rows_sent else 1
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
@@ -529,7 +542,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--machine",
         "-m",
         help="machine file: with it, Ctrl-C makes a controlled stop (ramp down along the path within the "
-        "acceleration limits, exit status 130) instead of letting the buffer run out",
+        "acceleration limits, exit status 130) instead of letting the buffer run out, and the operator "
+        "controls work: on a terminal, space = feed hold/resume, +/- = feed override, q = stop; from a pipe, "
+        "lines 'hold', 'resume', 'override 0.5', 'stop'",
     )
     sp.add_argument("--quiet", "-q", action="store_true")
     sp.set_defaults(func=cmd_play)

@@ -5,11 +5,14 @@ moves), then loops: write as many rows as the sink has room for, each with the e
 on them, and let the sink's clock run when its buffer is full. Progress is the sink's executed
 tick.
 
-Controlled stop (Ctrl-C, or :meth:`Player.request_stop` from another thread): the player stops
-reading the table and sends instead a ramp-down along the path from the last row it sent — the
-table re-sampled by :class:`~jaxcnc.hw.timewarp.TimeWarp` with its rate going to 0 as fast as the
-table's spare acceleration allows — then lets the buffer run out. The drives stop on the path, at
-rest, within the acceleration limits, after the rows already buffered plus the hold distance.
+Feed hold, resume and override (:meth:`Player.hold`, :meth:`Player.resume`,
+:meth:`Player.set_override`, from any thread): from the last row it sent, the player plays the
+table re-sampled by :class:`~jaxcnc.hw.timewarp.TimeWarp`, its rate moving to the commanded one
+(0 for a hold) as fast as the table's spare acceleration allows. The path is the table's.
+
+Controlled stop (Ctrl-C, or :meth:`Player.request_stop`): a hold that ends the play — the drives
+stop on the path, at rest, within the acceleration limits, after the rows already buffered plus
+the hold distance; the laser is switched off there.
 """
 
 from __future__ import annotations
@@ -17,12 +20,13 @@ from __future__ import annotations
 import signal
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
 from jaxcnc.hw.sinks.base import Sink
-from jaxcnc.hw.tablefile import TableFile
+from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableFile
 from jaxcnc.hw.timewarp import TimeWarp
 
 
@@ -40,45 +44,79 @@ class PlayResult:
         return self.table_time_s / self.wall_s if self.wall_s > 0 else float("inf")
 
 
-def stop_ramp(table: TableFile, a_max: np.ndarray, sent: int) -> np.ndarray:
-    """Rows (int32) that bring the motion after table row ``sent - 1`` to rest along the path.
-
-    The table is re-sampled from that row with a rate ramping from 1 to 0 at the spare
-    acceleration of every axis (:class:`~jaxcnc.hw.timewarp.TimeWarp`). If the table ends (at
-    rest) sooner, its remaining rows are the ramp.
-    """
-    n = table.n_rows
-    warp = TimeWarp(table, a_max)
-    warp.tau = float(max(sent - 1, 0))
-    warp.command(0.0)
-    out = []
-    while warp.rate > 0.0 and not warp.done:
-        out.append(warp.step())
-    rows = np.round(np.asarray(out) / table.header.discrete_mm).astype(np.int32) if out else None
-    if warp.done or rows is None or sent + rows.shape[0] > n:
-        return table.read_positions(sent, n)
-    return rows
-
-
 class Player:
-    """Plays a table into a sink; :meth:`request_stop` asks for a controlled stop (thread-safe)."""
+    """Plays a table into a sink. Thread-safe controls while it plays (they need ``a_max``):
+    :meth:`hold`, :meth:`resume`, :meth:`set_override` and :meth:`request_stop`.
 
-    def __init__(self, table: TableFile, sink: Sink, *, a_max: np.ndarray | None = None, chunk_rows: int = 4096):
+    Feed hold and override re-sample the table by time warp (:class:`~jaxcnc.hw.timewarp.TimeWarp`):
+    the path is the table's, the rate ramps within the spare acceleration. The laser is switched
+    off once a hold has brought the drives to rest and back on before they move again. A command
+    acts after the rows already in the sink's buffer (its latency is the buffer's length).
+    """
+
+    def __init__(
+        self,
+        table: TableFile,
+        sink: Sink,
+        *,
+        a_max: np.ndarray | None = None,
+        chunk_rows: int = 4096,
+        warp_chunk_rows: int = 256,
+    ):
         self.table, self.sink, self.a_max, self.chunk_rows = table, sink, a_max, chunk_rows
+        self.warp_chunk_rows = warp_chunk_rows
         self._stop = threading.Event()
+        self._held = False
+        self._override = 1.0
+        self.holds = 0  # holds that brought the drives to rest
 
+    # ---- controls (any thread) -------------------------------------------------------------------
     def request_stop(self) -> None:
         self._stop.set()
 
-    def _send(self, first: int, rows: np.ndarray, events: np.ndarray, progress, stoppable: bool = False) -> int:
+    def _need_limits(self) -> None:
+        if self.a_max is None:
+            raise ValueError("feed hold and override need the machine's acceleration limits (a_max)")
+
+    def hold(self) -> None:
+        """Feed hold: ramp down along the path to rest and wait there."""
+        self._need_limits()
+        self._held = True
+
+    def resume(self) -> None:
+        """Leave a feed hold: ramp back up to the override rate."""
+        self._held = False
+
+    def set_override(self, rate: float) -> None:
+        """Feed override: play at ``rate`` (0 < rate ≤ 1) times the planned speed."""
+        self._need_limits()
+        if not 0.0 < rate <= 1.0:
+            raise ValueError("the override is a rate in (0, 1]: the table is already planned at the limits")
+        self._override = float(rate)
+
+    @property
+    def override(self) -> float:
+        """The feed override rate (1 = as planned)."""
+        return self._override
+
+    @property
+    def held(self) -> bool:
+        return self._held
+
+    @property
+    def commanded_rate(self) -> float:
+        return 0.0 if self._held or self._stop.is_set() else self._override
+
+    # ---- playing ---------------------------------------------------------------------------------
+    def _send(self, first: int, rows: np.ndarray, events: np.ndarray, progress, interruptible: bool = False) -> int:
         """Write ``rows`` for ticks ``first ..`` as the sink makes room, with the events among them.
 
-        Returns the rows written: all of them, or with ``stoppable`` those written before a stop
-        was requested (a controlled stop then ramps down from there).
+        Returns the rows written: all of them, or with ``interruptible`` those written before a
+        control asked for something other than the plan (the caller then warps from there).
         """
         done = 0
         while done < rows.shape[0]:
-            if stoppable and self._stop.is_set() and self.a_max is not None:
+            if interruptible and self.commanded_rate != 1.0 and self.a_max is not None:
                 break
             room = self.sink.free_rows()
             if room <= 0:
@@ -92,34 +130,102 @@ class Player:
             done += n
         return done
 
+    def _warped_events(self, taus: np.ndarray, tau0: float, out: int) -> np.ndarray:
+        """The table's events in table time ``(tau0, taus[-1]]``, moved to the output ticks that reach them."""
+        ev = self.table.events
+        lo, hi = np.searchsorted(ev["tick"], [np.floor(tau0) + 1, np.floor(taus[-1]) + 1])
+        moved = ev[lo:hi].copy()
+        moved["tick"] = out + np.searchsorted(taus, moved["tick"], side="left")
+        return moved
+
+    def _laser_event(self, tick: int, power: float, mode: int) -> np.ndarray:
+        e = np.zeros(1, EVENT_DTYPE)
+        e["tick"], e["kind"], e["aux"], e["value"] = tick, EventKind.LASER, mode, power
+        return e
+
     def run(self, progress=None) -> PlayResult:
         """Play to the end, or until a stop is requested (then ramp down and stop)."""
         table, sink = self.table, self.sink
         h = table.header
         t0 = time.perf_counter()
         sink.open(h)
-        sent = 0
+        out = 0  # output ticks sent (the sink's tick numbers)
+        row = 0  # table rows played, while not warped
+        warp: TimeWarp | None = None
+        laser = (0.0, 0)  # the table's laser state at the last row sent: (power, mode)
+        parked = False  # a hold switched the laser off
         stopped = False
         try:
-            while sent < h.n_rows:
-                if self._stop.is_set() and self.a_max is not None:
-                    ramp = stop_ramp(table, self.a_max, sent)
-                    sent += self._send(sent, ramp, table.events[:0], progress)  # the program's events are not reached
-                    stopped = sent < h.n_rows
+            while True:
+                if warp is None:
+                    if row >= h.n_rows:
+                        break
+                    if self.commanded_rate == 1.0 or self.a_max is None:
+                        n = min(self.chunk_rows, h.n_rows - row)
+                        k = self._send(out, table.read_positions(row, row + n), table.events, progress, True)
+                        lo, hi = np.searchsorted(table.events["tick"], [row, row + k])
+                        laser = _laser_state(table.events[lo:hi], laser)
+                        row, out = row + k, out + k
+                        continue
+                    warp = TimeWarp(table, self.a_max)
+                    warp.tau = float(max(row - 1, 0))
+                if warp.done:
                     break
-                n = min(self.chunk_rows, h.n_rows - sent)
-                sent += self._send(sent, table.read_positions(sent, sent + n), table.events, progress, stoppable=True)
+                target = self.commanded_rate
+                if target > 0.0 and parked and warp.rate == 0.0:  # leaving a hold: the laser first
+                    sink_ev = self._laser_event(out, *laser) if laser[0] > 0 else np.zeros(0, EVENT_DTYPE)
+                    parked = False
+                else:
+                    sink_ev = np.zeros(0, EVENT_DTYPE)
+                warp.command(target)
+                tau0 = warp.tau
+                rows = warp.rows(self.warp_chunk_rows)
+                taus = warp.last_taus
+                events = self._warped_events(taus, tau0, out) if rows.shape[0] else np.zeros(0, EVENT_DTYPE)
+                laser = _laser_state(events, laser)
+                if warp.rate == 0.0 and target == 0.0 and not parked and rows.shape[0]:
+                    parked = True  # at rest: the laser off (after the chunk's own events)
+                    if self._stop.is_set():
+                        stopped = True
+                    else:
+                        self.holds += 1
+                    if laser[0] > 0:
+                        events = np.concatenate([events, self._laser_event(out + rows.shape[0] - 1, 0.0, 0)])
+                events = np.sort(np.concatenate([sink_ev, events]), order="tick", kind="stable")
+                k = self._send(out, rows, events, progress)
+                out += k
+                if stopped:
+                    break
         finally:
             sink.close()
         if progress:
             progress(sink.executed_tick() + 1)
         return PlayResult(
-            rows_sent=sent,
+            rows_sent=out,
             executed_tick=sink.executed_tick(),
             wall_s=time.perf_counter() - t0,
-            table_time_s=(h.n_rows - 1) / h.tick_hz,
+            table_time_s=max(sink.executed_tick(), 0) / h.tick_hz,  # the motion played
             stopped=stopped,
         )
+
+
+def _laser_state(events: np.ndarray, state: tuple[float, int]) -> tuple[float, int]:
+    """The laser (power, mode) after ``events``, given ``state`` before them."""
+    laser = events[events["kind"] == EventKind.LASER]
+    return (float(laser["value"][-1]), int(laser["aux"][-1])) if laser.size else state
+
+
+@contextmanager
+def sigint_stops(player: Player):
+    """While the block runs, Ctrl-C asks ``player`` for a controlled stop (main thread, with limits)."""
+    if player.a_max is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, lambda *_: player.request_stop())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def play(
@@ -137,10 +243,7 @@ def play(
     makes a controlled stop instead of raising :class:`KeyboardInterrupt`.
     """
     player = Player(table, sink, a_max=a_max, chunk_rows=chunk_rows)
-    if not (stop_on_sigint and a_max is not None and threading.current_thread() is threading.main_thread()):
+    if not stop_on_sigint:
         return player.run(progress)
-    previous = signal.signal(signal.SIGINT, lambda *_: player.request_stop())
-    try:
+    with sigint_stops(player):
         return player.run(progress)
-    finally:
-        signal.signal(signal.SIGINT, previous)

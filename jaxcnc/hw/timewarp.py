@@ -87,9 +87,10 @@ class TimeWarp:
 
         While the rate ramps, one tick at a time; at a steady rate, a whole chunk at once.
         """
-        out = []
+        out, taus = [], []
         while len(out) < count and not self.done and self.rate != self.target:
             out.append(self.step()[None, :])
+            taus.append([self.tau])
         left = count - len(out)
         if left > 0 and not self.done and self.rate > 0:
             tau = np.minimum(self.tau + self.rate * np.arange(1, left + 1), self.n - 1.0)
@@ -98,9 +99,12 @@ class TimeWarp:
             lo, hi = int(j[0]), int(j[-1]) + 2
             p = self.table.exact_mm(lo, hi)
             out.append(p[j - lo] + (tau - j)[:, None] * (p[j - lo + 1] - p[j - lo]))
+            taus.append(tau)
             self.tau = float(tau[-1])
         elif left > 0 and not self.done:  # holding: the position does not change
             out.append(np.repeat(self.step()[None, :], left, axis=0))
+            taus.append(np.full(left, self.tau))
+        self.last_taus = np.concatenate(taus) if taus else np.zeros(0)  # table time of each row returned
         return np.concatenate(out) if out else np.zeros((0, self.table.header.n_axes))
 
     def rows(self, count: int) -> np.ndarray:

@@ -223,11 +223,15 @@ class StreamSink:
     def close(self) -> None:
         """Send END until the receiver reports every row executed."""
         end = Frame(END, self.header.n_axes, self.seq, self.rows_sent, 0, 0)
-        for _ in range(self.retries * 10):
-            if self.done:
-                break
+        stall_s = max(2.0, self.retries * self.timeout)  # give up only when the board stops progressing
+        deadline, seen = time.monotonic() + stall_s, self.executed
+        while not self.done and time.monotonic() < deadline:
             self._send(end)
             self.wait()
+            if self.executed != seen:
+                deadline, seen = time.monotonic() + stall_s, self.executed
+            elif not self.done:
+                time.sleep(self.timeout / 4)  # the board is draining its buffer: do not flood the link
         if self.tcp is not None:
             self.tcp.sock.close()
         if self.udp is not None:
