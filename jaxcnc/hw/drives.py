@@ -99,12 +99,12 @@ class DriveClock:
             return self.last.astype(np.float64)
         return self.last + self.frac * (self._peek(1)[0] - self.last)
 
-    def run(self, ticks: int, ended: bool) -> tuple[np.ndarray, np.ndarray]:
+    def run(self, ticks: int, ended: bool, positions: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Advance ``ticks`` servo ticks; ``ended``: every row of the job is in the buffer.
 
         Returns ``(taken, positions)``: the rows taken in these ticks (table rows
-        ``executed - len(taken) + 1 .. executed``) and the drives' positions at each tick
-        ``(ticks, n_axes)`` float discretes (fewer rows once the job is done).
+        ``executed - len(taken) + 1 .. executed``) and, if asked, the drives' positions at each
+        tick ``(ticks, n_axes)`` float discretes (fewer rows once the job is done).
         """
         taken: list[np.ndarray] = []
         pos: list[np.ndarray] = []
@@ -115,11 +115,12 @@ class DriveClock:
                 k = min(left, self.queued - keep)  # as planned: one row per tick, vectorised
                 rows = self._take(k)
                 taken.append(rows)
-                p = rows.astype(np.float64)
-                if self.frac > 0.0:
-                    after = np.vstack([rows[1:], self._peek(1)]).astype(np.float64)
-                    p += self.frac * (after - p)
-                pos.append(p)
+                if positions:
+                    p = rows.astype(np.float64)
+                    if self.frac > 0.0:
+                        after = np.vstack([rows[1:], self._peek(1)]).astype(np.float64)
+                        p += self.frac * (after - p)
+                    pos.append(p)
                 left -= k
                 continue
             if self.queued == 0 and ended:
@@ -135,12 +136,14 @@ class DriveClock:
                 target = self.rate  # between reserve and resume: carry on as we are
             if target == 0.0 and self.rate == 0.0:
                 self.held_ticks += left  # at rest on the path, waiting for rows
-                pos.append(np.repeat(self._position()[None, :], left, axis=0))
+                if positions:
+                    pos.append(np.repeat(self._position()[None, :], left, axis=0))
                 break
             rows, p = self._step(target, ended)
             if rows is not None:
                 taken.append(rows)
-            pos.append(p[None, :])
+            if positions:
+                pos.append(p[None, :])
             left -= 1
         empty = np.zeros((0, self.n_axes))
         return (

@@ -119,7 +119,7 @@ class Receiver:
         due = self.servo0 + int((now - self.t0) * self.tick_hz * self.speed) - self.servo
         if due <= 0:
             return
-        taken, _ = self.clock.run(due, all_in)
+        taken, _ = self.clock.run(due, all_in, positions=False)
         self.servo += due
         self.recorder.append(taken)
 

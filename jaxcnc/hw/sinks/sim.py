@@ -75,7 +75,7 @@ class SimSink:
 
     def _execute(self, n: int, ended: bool = False) -> None:
         """Run the drives' clock ``n`` servo ticks."""
-        taken, pos = self.clock.run(n, ended)
+        taken, pos = self.clock.run(n, ended, positions=self.trace is not None)
         self._servo += n
         self._rec.append(taken)
         if self.trace is not None:
