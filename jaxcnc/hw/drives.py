@@ -171,7 +171,8 @@ class DriveClock:
             return None, self._position()
         step = self._r_dot() / self.f
         new = self.rate + float(np.clip(target - self.rate, -step, step))
-        dt = 0.5 * (self.rate + new)  # table ticks played in this servo tick
+        # table ticks played in this servo tick (the mean rate; without limits the rate jumps)
+        dt = new if self.a_max is None else 0.5 * (self.rate + new)
         room = self.queued - self.frac  # table time left in the buffer
         if dt >= room and not ended:
             dt, new = room, 0.0  # the ramp did not fit the buffer: stop at its last row

@@ -224,12 +224,13 @@ class StreamSink:
         """Send END until the receiver reports every row executed."""
         end = Frame(END, self.header.n_axes, self.seq, self.rows_sent, 0, 0)
         stall_s = max(2.0, self.retries * self.timeout)  # give up only when the board stops progressing
-        deadline, seen = time.monotonic() + stall_s, self.executed
+        deadline, seen = time.monotonic() + stall_s, (self.executed, self.acked)
         while not self.done and time.monotonic() < deadline:
-            self._send(end)
+            if not self.retained:
+                self._send(end)  # (while rows are unacknowledged, their acknowledgements come first)
             self.wait()
-            if self.executed != seen:
-                deadline, seen = time.monotonic() + stall_s, self.executed
+            if (self.executed, self.acked) != seen:
+                deadline, seen = time.monotonic() + stall_s, (self.executed, self.acked)
             elif not self.done:
                 time.sleep(self.timeout / 4)  # the board is draining its buffer: do not flood the link
         if self.tcp is not None:
