@@ -12,6 +12,18 @@ intervals:
 handed to CasADi/IPOPT (started from a slow feasible guess, not from jaxcnc's answer), so it is
 an independent check of the built-in planner's optimum. Optional dependency
 (``pip install 'jaxcnc[ref]'``).
+
+Jerk (where the machine sets ``j_max``): an axis moves with jerk ``T s⃛ + 3 K ṡ s̈ + K' ṡ³``
+(``K' = d³x/ds³``, from the nodes' curvature by central differences). At node ``k``, ``s̈`` steps
+from ``u_(k-1)`` to ``u_k`` over the time between the intervals' midpoints,
+``(Δ_(k-1) + Δ_k) / (2 c_k)``, so ``s⃛ ≈ 2 c_k (u_k - u_(k-1)) / (Δ_(k-1) + Δ_k)`` and, with
+``s̈ ≈ (u_(k-1) + u_k)/2``,
+
+    |T_ik s⃛_k + 3 K_ik c_k s̈_k + K'_ik c_k³| ≤ J_i         (polynomial in the unknowns)
+
+with ``s̈ = 0`` before the first and after the last interval (rest). This is the discretised
+jerk-limited problem researchers solve; the plan built from its nodes still holds ``s̈``
+constant per interval, so its table shows jerk steps between them (printed as its violation).
 """
 
 from __future__ import annotations
@@ -51,6 +63,23 @@ def casadi_planner(n_points: int = DEFAULT_POINTS, tol: float = 1e-9) -> Planner
                     hi.append(np.full(n, amax[i]))
             v_cap = np.sqrt(cap[a : b + 1])
             v_cap[0] = v_cap[-1] = 0.0
+            jmax = p.j_max[axes]
+            if np.any(np.isfinite(jmax)):
+                kp = _curvature_rate(p.s[a : b + 1], k)
+                zero = ca.MX.zeros(1)
+                u_prev, u_next = ca.vertcat(zero, u), ca.vertcat(u, zero)  # s̈ before/after each node
+                d_prev = np.concatenate([[d[0]], d])
+                d_next = np.concatenate([d, [d[-1]]])
+                c_mid = ca.vertcat(c[1], c[1:-1], c[-2]) if n > 1 else ca.vertcat(c[1], c[0])
+                # the end nodes are at rest: there s̈ ramps over the first/last interval at its far speed
+                span = np.concatenate([[2.0 * d[0]], d_prev[1:-1] + d_next[1:-1], [2.0 * d[-1]]]) / 2.0
+                s3 = (u_next - u_prev) * c_mid / span
+                sdd = (u_prev + u_next) / 2.0
+                for i in range(axes.size):
+                    if np.isfinite(jmax[i]):
+                        g.append(t[:, i] * s3 + 3.0 * k[:, i] * c * sdd + kp[:, i] * c * c * c)
+                        lo.append(np.full(n + 1, -jmax[i]))
+                        hi.append(np.full(n + 1, jmax[i]))
             nlp = {"x": ca.vertcat(c, u), "f": ca.sum1(2.0 * d / (c[:-1] + c[1:] + 1e-12)), "g": ca.vertcat(*g)}
             opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": 0, "ipopt.tol": tol}
             solver = ca.nlpsol("topp", "ipopt", nlp, opts)
@@ -68,7 +97,15 @@ def casadi_planner(n_points: int = DEFAULT_POINTS, tol: float = 1e-9) -> Planner
             x[a : b + 1] = np.asarray(res["x"][: n + 1]).ravel() ** 2
         return plan_from_nodes(p, x, req)
 
+    plan.handles_jerk = True  # plan_job does not average its time law: the NLP has the jerk rows
     return plan
+
+
+def _curvature_rate(s: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``(m+1, n_axes)`` ``dK/ds`` at the nodes: central differences, one-sided at the ends."""
+    if s.size < 3:
+        return np.zeros_like(k)
+    return np.gradient(k, s, axis=0)
 
 
 register_planner("casadi")(casadi_planner())

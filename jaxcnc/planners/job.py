@@ -15,6 +15,7 @@ from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
 from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PlanRequest, get_planner
+from jaxcnc.planners.smoothing import SmoothPlan, jerk_limited
 from jaxcnc.planners.timelaw import Plan
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 
@@ -29,7 +30,7 @@ class PlannedJob:
 
     program: Program
     spans: Spans
-    plan: Plan
+    plan: Plan | SmoothPlan
     machine: MachineConfig
     axis_source: tuple[int, ...]
     plan_wall_s: float
@@ -111,7 +112,12 @@ def plan_job(program: Program, machine: MachineConfig, planner: str = DEFAULT_PL
     v_max = np.where(np.isnan(lim["v_max"]), np.inf, lim["v_max"])
     a_max = np.where(np.isnan(lim["a_max"]), np.inf, lim["a_max"])
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine)
-    plan = get_planner(planner)(request)
+    j_max = np.where(np.isnan(lim["j_max"]), np.inf, lim["j_max"])
+    fn = get_planner(planner)
+    if np.any(np.isfinite(j_max)) and not getattr(fn, "handles_jerk", False):
+        plan = jerk_limited(request, fn, j_max)  # jerk limits: the planner's time law averaged (an S-curve)
+    else:
+        plan = fn(request)
     return PlannedJob(
         program=program,
         spans=spans,

@@ -19,6 +19,7 @@ from jaxcnc.planners.grid import Grid, build_grid
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions
 from jaxcnc.planners.registry import PlanRequest
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
+from jaxcnc.program import PROGRAM_AXES
 
 #: Grid points of a reference plan unless the request's machine says otherwise.
 DEFAULT_POINTS = 16_000
@@ -36,6 +37,7 @@ class RefProblem:
         feed: ``(m+1,)`` programmed speed at the nodes (the lower of the two spans at a boundary).
         pieces: list of ``(first_node, last_node)`` planned from rest to rest.
         v_max, a_max: ``(3,)`` axis limits (kept ``NUMERIC_MARGIN`` below the machine's).
+        j_max: ``(3,)`` axis jerk limits (``inf`` where unset or absent).
     """
 
     grid: Grid
@@ -46,6 +48,7 @@ class RefProblem:
     pieces: list[tuple[int, int]]
     v_max: np.ndarray
     a_max: np.ndarray
+    j_max: np.ndarray
 
 
 def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
@@ -73,7 +76,9 @@ def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
     rest_nodes = np.unique(first_node[rest_span])
     pieces = [(int(a), int(b)) for a, b in zip(rest_nodes[:-1], rest_nodes[1:], strict=True) if s[b] > s[a]]
     keep = 1.0 - NUMERIC_MARGIN
-    return RefProblem(grid, s, t, k, feed, pieces, req.v_max * keep, req.a_max * keep)
+    j_max = req.machine.limits(PROGRAM_AXES)["j_max"]
+    j_max = np.where(np.isnan(j_max), np.inf, j_max) * keep
+    return RefProblem(grid, s, t, k, feed, pieces, req.v_max * keep, req.a_max * keep, j_max)
 
 
 def node_caps(p: RefProblem) -> np.ndarray:

@@ -70,6 +70,10 @@ class Plan:
         """``(n_spans,)`` index of the first segment of each span."""
         return np.searchsorted(self.span, np.arange(n_spans), side="left")
 
+    def span_start_ticks(self, n_spans: int) -> np.ndarray:
+        """``(n_spans,)`` the first tick at or after each span's start."""
+        return self.first_tick[self.span_first_segment(n_spans)]
+
 
 #: The per-segment outputs of :func:`trapezoids` + :func:`align_to_ticks` that a :class:`Plan` keeps.
 _PROFILE_KEYS = (

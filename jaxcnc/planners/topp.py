@@ -35,12 +35,15 @@ from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
 from jaxcnc.planners.trapezoid import MOVING_MM, bucket_size, pad_rows
+from jaxcnc.program import PROGRAM_AXES
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
 REFINE_FACTOR = 4
 #: Stand-in for an infinite limit (absent axis) that keeps the eliminations free of inf - inf.
 BIG = 1e30
+#: Share of an axis' jerk limit the curvature's change may take at constant speed (see :func:`jerk_cap`).
+JERK_SHARE = 0.5
 
 
 def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndarray, chord_tol_mm, tick_hz):
@@ -51,8 +54,23 @@ def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndar
     return jnp.minimum(jnp.minimum(x_axis, feed**2), v_chord**2)
 
 
+def jerk_cap(k_a: jnp.ndarray, k_b: jnp.ndarray, delta: jnp.ndarray, j_max: jnp.ndarray) -> jnp.ndarray:
+    """``(m,)`` cap on ``x = v²`` on intervals where the curvature changes, from the axes' jerk limits.
+
+    At constant speed an axis on a curve has jerk ``K' ṡ³`` (``K' = dK/ds``, here the change of the
+    curvature vector across the interval over its length); keeping it within ``JERK_SHARE`` of
+    ``J_i`` leaves the rest for the time law's own jerk: ``x ≤ (share J_i / |K'_i|)^(2/3)``.
+    """
+    kp = jnp.abs(k_b - k_a) / jnp.where(delta > 0, delta, 1.0)[:, None]
+    ok = (kp > 0) & jnp.isfinite(j_max)[None, :]
+    x = jnp.where(
+        ok, (JERK_SHARE * jnp.where(ok, j_max[None, :], 1.0) / jnp.where(ok, kp, 1.0)) ** (2.0 / 3.0), jnp.inf
+    )
+    return jnp.min(x, axis=1)
+
+
 @partial(jax.jit, static_argnames=("curved_any",))
-def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: bool):
+def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: bool, j_max=None):
     """The planner as one array program over ``m`` (padded) intervals; see the module docstring.
 
     ``g`` holds the grid (``span, delta, t_a, k_a, t_b, k_b, curved, feed, dwell``), ``sp`` the span
@@ -74,6 +92,10 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
     is_point = sp["kind"][span] == SpanKind.POINT
     cap_a = jnp.where(is_point, 0.0, jnp.where(first, jnp.minimum(vcap_a, cap_start[span]), vcap_a))
     cap_b = jnp.where(is_point, 0.0, jnp.where(last, jnp.minimum(vcap_b, cap_end[jnp.clip(span, 0, n - 1)]), vcap_b))
+    cap_a, cap_b = jnp.minimum(cap_a, g["hold_a"]), jnp.minimum(cap_b, g["hold_b"])  # requested holds (nodes)
+    if j_max is not None:  # jerk limits: the curvature may change only so fast at speed
+        x_jerk = jerk_cap(g["k_a"], g["k_b"], g["delta"], j_max)
+        cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
     delta = g["delta"]
     gu, gx, h = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b)
     x_node = solve(gu, gx, h, delta, cap_a, jnp.zeros(()), curved_any)
@@ -143,6 +165,29 @@ def plan_topp(req: PlanRequest) -> Plan:
     return plan_from_outputs(out, grid.delta, grid.span, grid.s_start, req.machine.tick_hz)
 
 
+def node_holds(req: PlanRequest, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+    """``(m,)`` caps on ``x = v²`` at each interval's start and end node from ``req.hold_caps``."""
+    m = len(grid)
+    hold_a, hold_b = np.full(m, np.inf), np.full(m, np.inf)
+    if req.hold_caps is None or len(req.hold_caps) == 0:
+        return hold_a, hold_b
+    span_s0 = np.cumsum(req.spans.length) - req.spans.length
+    s_a = span_s0[grid.span] + grid.s_start
+    s_b = s_a + grid.delta
+    rows = np.asarray(req.hold_caps, dtype=np.float64)
+    for s_node, hold in ((s_a, hold_a), (s_b, hold_b)):
+        order = np.argsort(s_node, kind="stable")
+        lo = np.searchsorted(s_node[order], rows[:, 0], side="left")
+        hi = np.searchsorted(s_node[order], rows[:, 1], side="right")
+        count = np.maximum(hi - lo, 0)
+        if count.sum() == 0:
+            continue
+        which = np.repeat(np.arange(rows.shape[0]), count)
+        idx = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
+        np.minimum.at(hold, order[idx], rows[which, 2] ** 2)
+    return hold_a, hold_b
+
+
 def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
     """Pad the grid to a bucket, run :func:`plan_grid`, return its outputs as NumPy arrays."""
     spans, machine = req.spans, req.machine
@@ -160,6 +205,8 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
         "dwell": pad_rows(np.where(grid.s_start == 0, req.dwell_s[s], 0.0), mb, 0.0),
     }
+    hold_a, hold_b = node_holds(req, grid)
+    g["hold_a"], g["hold_b"] = pad_rows(hold_a, mb, np.inf), pad_rows(hold_b, mb, np.inf)
     # padding intervals sit on a padding point span after the program
     g["span"][m:] = n
     sp = {
@@ -169,6 +216,8 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         "stop_before": pad_rows(req.stop_before, nb, True),
     }
     keep = 1.0 - NUMERIC_MARGIN
+    j_max = machine.limits(PROGRAM_AXES)["j_max"]
+    j_max = np.where(np.isnan(j_max), np.inf, j_max)
     out = plan_grid(
         g,
         sp,
@@ -177,5 +226,6 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         machine.path.chord_tol_mm,
         machine.tick_hz,
         curved_any=bool(grid.curved.any()),
+        j_max=jnp.asarray(j_max) if np.any(np.isfinite(j_max)) else None,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}

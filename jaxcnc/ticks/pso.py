@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind
+from jaxcnc.planners.smoothing import SmoothPlan
 from jaxcnc.planners.timelaw import Plan
 
 
@@ -35,7 +36,7 @@ def _time_in_span(plan: Plan, k: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.clip(np.nan_to_num(tau), 0.0, ta + tc + td)
 
 
-def pso_events(plan: Plan, lit: np.ndarray, pso_mm: float) -> np.ndarray:
+def pso_events(plan: Plan | SmoothPlan, lit: np.ndarray, pso_mm: float) -> np.ndarray:
     """``PSO_PULSE`` events ``(EVENT_DTYPE)`` every ``pso_mm`` along the lit segments (``lit``: ``(n_segments,)``)."""
     length = np.where(lit, plan.length, 0.0)
     run_start = lit & ~np.concatenate([[False], lit[:-1]])
@@ -55,8 +56,11 @@ def pso_events(plan: Plan, lit: np.ndarray, pso_mm: float) -> np.ndarray:
     # span holding each pulse: the last lit span starting at or before it
     pos = np.clip(np.searchsorted(s_begin[lit_idx], s_abs, side="right") - 1, 0, lit_idx.size - 1)
     k = lit_idx[pos]
-    tau = _time_in_span(plan, k, s_abs - s_begin[k])
-    tick = np.rint(plan.group_tick[k] + plan.offset_ticks[k] + tau * plan.tick_hz).astype(np.int64)
+    if isinstance(plan, SmoothPlan):  # a jerk-limited time law: the tick where s_W reaches each pulse
+        tick = plan.ticks_at_s(s_abs)
+    else:
+        tau = _time_in_span(plan, k, s_abs - s_begin[k])
+        tick = np.rint(plan.group_tick[k] + plan.offset_ticks[k] + tau * plan.tick_hz).astype(np.int64)
     out = np.zeros(tick.shape[0], EVENT_DTYPE)
     out["tick"], out["kind"], out["aux"], out["value"] = tick, EventKind.PSO_PULSE, np.arange(tick.shape[0]), s_run
     return out

@@ -22,6 +22,7 @@ from jaxcnc.geometry.inverse import span_arrays, u_of_s
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.hw.tablefile import FINE_SCALE
 from jaxcnc.planners.job import PlannedJob
+from jaxcnc.planners.smoothing import SmoothPlan, positions_at_s, span_starts
 from jaxcnc.planners.timelaw import PLAN_KEYS, s_at, segment_of_tick
 from jaxcnc.planners.trapezoid import bucket_size
 
@@ -90,6 +91,12 @@ class TickSampler:
     def __init__(self, job: PlannedJob, chunk: int = CHUNK_TICKS):
         self.job, self.chunk = job, chunk
         plan, spans = job.plan, job.spans
+        m_axes = job.machine.axis_names
+        self._src = np.asarray(job.axis_source)
+        self._home = np.array([job.machine.axis(a).home for a in m_axes])
+        if isinstance(plan, SmoothPlan):  # jerk-limited: tick → s_W → span → u → position
+            self._spans, self._span_s0 = span_starts(spans)
+            return
         n = len(plan)
         m = bucket_size(n)
         big = np.iinfo(np.int64).max
@@ -100,9 +107,6 @@ class TickSampler:
         keys = PLAN_KEYS + ("length", "span", "s_start")
         self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in keys}
         self._spans = span_arrays(pad_spans(spans, bucket_size(len(spans))))
-        m_axes = job.machine.axis_names
-        self._src = np.asarray(job.axis_source)
-        self._home = np.array([job.machine.axis(a).home for a in m_axes])
 
     @property
     def n_rows(self) -> int:
@@ -110,6 +114,11 @@ class TickSampler:
 
     def program_positions(self, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
         """Exact x, y, z positions ``(count, 3)`` mm and span index of ticks ``first..``."""
+        plan = self.job.plan
+        if isinstance(plan, SmoothPlan):
+            ticks = np.minimum(np.arange(first, first + self.chunk), plan.n_ticks)
+            p, span = positions_at_s(self._spans, self._span_s0, jnp.asarray(plan.s_at(ticks)))
+            return np.asarray(p)[:count], np.asarray(span)[:count]
         p, seg = _positions_chunk(
             jnp.int64(first),
             jnp.int64(self.job.plan.n_ticks),

@@ -35,7 +35,7 @@ def job_events(job: PlannedJob) -> np.ndarray:
     """The event records of a job, sorted by tick (``EVENT_DTYPE``)."""
     prog, spans, plan = job.program, job.spans, job.plan
     rows = spans.block
-    tick = plan.first_tick[plan.span_first_segment(len(spans))]  # where each span starts
+    tick = plan.span_start_ticks(len(spans))  # where each span starts
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     parts = []
 

@@ -1,0 +1,362 @@
+"""Jerk-limited time laws: each rest-to-rest group's ``s(t)`` averaged over a window of ``W`` seconds.
+
+A planner's time law has piecewise-constant ``s̈`` — its jerk is unbounded where ``s̈`` steps.
+Averaging the path position over the last ``W`` seconds,
+
+    s_W(t) = (1/W) ∫_{t-W}^{t} s(τ) dτ,     ṡ_W = (s(t) - s(t-W)) / W,
+    s̈_W = (ṡ(t) - ṡ(t-W)) / W,              s⃛_W = (s̈(t) - s̈(t-W)) / W,
+
+keeps the path (positions are still ``p(s)``), makes ``s̈_W`` a mean of ``s̈`` (never larger) and
+bounds the path jerk by the swing of ``s̈`` over ``W``. On a line an axis moves ``x = T s`` with
+``|T s̈| ≤ A``, so its jerk ``|T s⃛_W| ≤ 2 A / W``: ``W = 2 A / J`` honours ``J``. (A trapezoid
+averaged this way is the classical 7-phase S-curve.) Each group starts and ends at rest, so the
+average runs per group and a group grows by ``W`` (whole ticks: rest points stay on ticks).
+
+On curves the axis jerk also has ``3 K ṡ s̈ + K' ṡ³`` terms, and the averaged speed near a slow
+point can exceed the slow point's cap; :func:`jerk_limited` therefore plans with the acceleration
+scaled by ``α`` and measures the result at every tick (exact positions, finite differences),
+bisecting for the largest ``α`` whose table keeps every limit.
+
+``s_W`` is evaluated in closed form: ``A(t) = ∫_0^t s`` of a trapezoid segment is a piecewise cubic,
+and ``s_W = (A(t) - A(t - W)) / W`` per group.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass
+from functools import cached_property, partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.geometry.evaluate import evaluate_spans
+from jaxcnc.geometry.inverse import span_arrays, u_of_s
+from jaxcnc.geometry.spans import pad_spans
+from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
+from jaxcnc.planners.trapezoid import bucket_size
+
+CHUNK = 1 << 16
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothPlan:
+    """A :class:`Plan` whose groups' ``s(t)`` is averaged over ``window_ticks`` ticks.
+
+    Group arrays ``(n_groups,)``: ``g_start`` (tick where the group starts in the base plan),
+    ``g_ticks`` (its whole ticks there), ``g_new_start`` (where it starts here), ``g_s0`` (path
+    length at its start), ``g_len`` (its path length). ``alpha``: the acceleration scale the base
+    plan was made with.
+    """
+
+    base: Plan
+    window_ticks: int
+    g_start: np.ndarray
+    g_ticks: np.ndarray
+    g_new_start: np.ndarray
+    g_s0: np.ndarray
+    g_len: np.ndarray
+    seg_s_in_group: np.ndarray  # (n_segments,) path length from the group start to the segment start
+    seg_prefix: np.ndarray  # (n_segments,) ∫ s dt from the group start to the segment start (mm·s)
+    alpha: float = 1.0
+
+    @property
+    def tick_hz(self) -> float:
+        return self.base.tick_hz
+
+    @property
+    def n_ticks(self) -> int:
+        return self.base.n_ticks + self.g_start.size * self.window_ticks
+
+    @property
+    def total_time_s(self) -> float:
+        return self.n_ticks / self.tick_hz
+
+    # the base plan's segments, for what maps path lengths to spans (events, PSO)
+    @property
+    def span(self) -> np.ndarray:
+        return self.base.span
+
+    @property
+    def length(self) -> np.ndarray:
+        return self.base.length
+
+    @property
+    def s_start(self) -> np.ndarray:
+        return self.base.s_start
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def span_start_ticks(self, n_spans: int) -> np.ndarray:
+        """``(n_spans,)`` the tick where each span starts (a group's first span: the group's first tick)."""
+        base = self.base
+        first = base.span_first_segment(n_spans)
+        group = np.searchsorted(self.g_start, base.group_tick[first], side="right") - 1
+        ticks = self.ticks_at_s(self.g_s0[group] + self.seg_s_in_group[first])
+        return np.where(base.offset_ticks[first] == 0.0, self.g_new_start[group], ticks)
+
+    @cached_property
+    def _device(self) -> dict[str, jnp.ndarray]:
+        return self.device_arrays()
+
+    def device_arrays(self) -> dict[str, jnp.ndarray]:
+        """The arrays :func:`s_of_ticks` reads (segments padded to a bucket size)."""
+        base = self.base
+        n = len(base)
+        m = bucket_size(n)
+        big = np.iinfo(np.int64).max
+
+        def pad(a: np.ndarray, fill=0) -> jnp.ndarray:
+            return jnp.asarray(np.pad(a, (0, m - n), constant_values=fill))
+
+        out = {k: pad(getattr(base, k), big if k == "first_tick" else 0) for k in PLAN_KEYS}
+        out["length"] = pad(base.length)
+        out["seg_s_in_group"] = pad(self.seg_s_in_group)
+        out["seg_prefix"] = pad(self.seg_prefix)
+        for k in ("g_start", "g_ticks", "g_new_start", "g_s0", "g_len"):
+            out[k] = jnp.asarray(getattr(self, k))
+        return out
+
+    def s_at(self, ticks: np.ndarray) -> np.ndarray:
+        """Path length from the program start at integer ``ticks`` ``(m,)`` (NumPy in and out)."""
+        arrays = self._device
+        t = np.asarray(ticks, dtype=np.int64)
+        out = np.empty(t.shape[0])
+        for i in range(0, t.shape[0], CHUNK):
+            part = t[i : i + CHUNK]
+            padded = np.pad(part, (0, CHUNK - part.shape[0]), mode="edge") if part.size else part
+            out[i : i + part.shape[0]] = np.asarray(
+                s_of_ticks(arrays, jnp.asarray(padded), self.window_ticks, self.tick_hz)
+            )[: part.shape[0]]
+        return out
+
+    def ticks_at_s(self, s: np.ndarray) -> np.ndarray:
+        """The first tick at which the path length reaches each of ``s`` ``(m,)`` (bisection; s_W is monotone)."""
+        s = np.asarray(s, dtype=np.float64)
+        lo = np.zeros(s.shape, np.int64)  # s_at(lo) < s or lo = 0
+        hi = np.full(s.shape, self.n_ticks, np.int64)  # s_at(hi) >= s (the end reaches everything)
+        eps = 1e-9
+        while np.any(hi - lo > 1):
+            mid = (lo + hi) // 2
+            reached = self.s_at(mid) >= s - eps
+            hi = np.where(reached, mid, hi)
+            lo = np.where(reached, lo, mid)
+        at_lo = self.s_at(lo) >= s - eps
+        return np.where(at_lo, lo, hi)
+
+
+def _segment_integral(plan: dict, seg: jnp.ndarray, tau: jnp.ndarray) -> jnp.ndarray:
+    """``∫_0^τ s_local`` (mm·s) of segment ``seg`` ``τ`` seconds after its start (linear past its end)."""
+    v0, vp, aa, ad = plan["v0"][seg], plan["vp"][seg], plan["a_acc"][seg], plan["a_dec"][seg]
+    ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
+    l_acc = v0 * ta + 0.5 * aa * ta**2
+    l_cru = vp * tc
+    t1 = jnp.clip(tau, 0.0, ta)
+    t2 = jnp.clip(tau - ta, 0.0, tc)
+    t3 = jnp.clip(tau - ta - tc, 0.0, td)
+    t4 = jnp.maximum(tau - ta - tc - td, 0.0)
+    return (
+        v0 * t1**2 / 2 + aa * t1**3 / 6
+        + l_acc * t2 + vp * t2**2 / 2
+        + (l_acc + l_cru) * t3 + vp * t3**2 / 2 - ad * t3**3 / 6
+        + plan["length"][seg] * t4
+    )  # fmt: skip
+
+
+def _group_integral(plan: dict, g: jnp.ndarray, tau: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
+    """``A_g(τ) = ∫ s_g`` from group ``g``'s start to ``τ`` ticks after it (0 before, linear after its end)."""
+    whole = plan["g_ticks"][g]
+    tc = jnp.clip(tau, 0, whole)
+    tick = plan["g_start"][g] + tc
+    seg = segment_of_tick(plan["first_tick"], tick)
+    t_seg = ((tick - plan["group_tick"][seg]).astype(jnp.float64) - plan["offset_ticks"][seg]) / tick_hz
+    t_seg = jnp.maximum(t_seg, 0.0)
+    a = plan["seg_prefix"][seg] + plan["seg_s_in_group"][seg] * t_seg + _segment_integral(plan, seg, t_seg)
+    a = a + plan["g_len"][g] * jnp.maximum(tau - whole, 0).astype(jnp.float64) / tick_hz
+    return jnp.where(tau <= 0, 0.0, a)
+
+
+@partial(jax.jit, static_argnames=("window_ticks", "tick_hz"))
+def s_of_ticks(plan: dict, ticks: jnp.ndarray, window_ticks: int, tick_hz: float) -> jnp.ndarray:
+    """Averaged path length ``s_W`` at integer ``ticks`` ``(m,)``: ``(A(t) - A(t - W)) / W`` in its group."""
+    g = jnp.clip(jnp.searchsorted(plan["g_new_start"], ticks, side="right") - 1, 0, plan["g_new_start"].shape[0] - 1)
+    tau = ticks - plan["g_new_start"][g]
+    w_s = window_ticks / tick_hz
+    area = _group_integral(plan, g, tau, tick_hz) - _group_integral(plan, g, tau - window_ticks, tick_hz)
+    return plan["g_s0"][g] + jnp.clip(area / w_s, 0.0, plan["g_len"][g])
+
+
+def _segment_integral_np(plan: Plan) -> np.ndarray:
+    """``∫ s_local`` over each whole segment (NumPy), from the same closed form."""
+    arrays = {k: jnp.asarray(getattr(plan, k)) for k in PLAN_KEYS}
+    arrays["length"] = jnp.asarray(plan.length)
+    seg = jnp.arange(len(plan))
+    return np.asarray(_segment_integral(arrays, seg, jnp.asarray(plan.duration_s)))
+
+
+def smooth(plan: Plan, window_ticks: int, s_start_of_segment: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
+    """Average ``plan``'s groups over ``window_ticks`` ticks; ``s_start_of_segment``: global s at each segment start."""
+    starts = np.flatnonzero(np.concatenate([[True], plan.group_tick[1:] != plan.group_tick[:-1]]))
+    g_start = plan.group_tick[starts].astype(np.int64)
+    g_ticks = np.diff(np.concatenate([g_start, [plan.n_ticks]])).astype(np.int64)
+    group = np.cumsum(np.isin(np.arange(len(plan)), starts)) - 1
+    g_s0 = s_start_of_segment[starts]
+    g_len = np.bincount(group, weights=plan.length, minlength=starts.size)
+    seg_s_in_group = s_start_of_segment - g_s0[group]
+    # ∫ s_g dt over each whole segment: s at its start times its duration, plus its own integral
+    whole = seg_s_in_group * plan.duration_s + _segment_integral_np(plan)
+    csum = np.cumsum(whole)
+    seg_prefix = csum - whole - (csum - whole)[starts][group]  # exclusive sum within the group
+    g_new_start = g_start + np.arange(starts.size, dtype=np.int64) * window_ticks
+    return SmoothPlan(
+        base=plan,
+        window_ticks=int(window_ticks),
+        g_start=g_start,
+        g_ticks=g_ticks,
+        g_new_start=g_new_start,
+        g_s0=g_s0,
+        g_len=g_len,
+        seg_s_in_group=seg_s_in_group,
+        seg_prefix=seg_prefix,
+        alpha=alpha,
+    )
+
+
+# ---- measuring a smoothed plan at every tick -------------------------------------------------------
+def span_starts(spans) -> tuple[dict, jnp.ndarray]:
+    """Device arrays of ``spans`` padded to a bucket and each span's start ``s`` (padding: never found)."""
+    n = len(spans)
+    padded = pad_spans(spans, bucket_size(n))
+    span_s0 = np.cumsum(padded.length) - padded.length
+    span_s0[n:] = np.inf
+    return span_arrays(padded), jnp.asarray(span_s0)
+
+
+@jax.jit
+def positions_at_s(spans: dict, span_s0: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Program-axis positions ``(m, 3)`` at path lengths ``s`` ``(m,)`` from the program start, and their span."""
+    span = jnp.clip(jnp.searchsorted(span_s0, s, side="right") - 1, 0, span_s0.shape[0] - 1)
+    (p,) = evaluate_spans(spans["coeffs_t"], spans["origin_t"], span, u_of_s(spans, span, s - span_s0[span]))
+    return p, span
+
+
+def span_peaks(
+    plan: SmoothPlan, spans, v_max: np.ndarray, a_max: np.ndarray, j_max: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per span: the worst ``max(|v|/v_max, |a|/a_max)`` and ``|j|/j_max`` over axes and ticks, and the peak speed.
+
+    Exact positions at every tick (the machine at rest before the first and after the last),
+    finite differences at the tick rate — what the table verifier will measure, less rounding.
+    Chunked: memory stays bounded for any job. Returns ``(2, n_spans)`` ratios and ``(n_spans,)`` speeds.
+    """
+    f = plan.tick_hz
+    n = len(spans)
+    arrays, span_s0 = span_starts(spans)
+    limits = np.stack([v_max, a_max, j_max])  # (3 quantities, 3 axes)
+    inv = np.where(np.isfinite(limits) & (limits > 0), 1.0 / np.where(limits > 0, limits, 1.0), 0.0)
+    worst = np.zeros((2, n))  # (v and a, j)
+    speed = np.zeros(n)
+    tail = None  # the last 3 positions of the previous chunk
+    total = plan.n_ticks + 1
+    for first in range(0, total, CHUNK):
+        last_chunk = first + CHUNK >= total
+        ticks = np.arange(first, min(first + CHUNK, total))
+        p, span = positions_at_s(arrays, span_s0, jnp.asarray(plan.s_at(ticks)))
+        p, span = np.asarray(p), np.asarray(span)
+        if tail is None:
+            tail = np.repeat(p[:1], 3, axis=0)
+        x = np.concatenate([tail, p] + ([np.repeat(p[-1:], 3, axis=0)] if last_chunk else []))
+        at = np.concatenate([span, np.repeat(span[-1:], 3)]) if last_chunk else span
+        for k in range(3):
+            d = np.abs(np.diff(x, k + 1, axis=0))[-at.shape[0] :] * f ** (k + 1)  # rows ending in this chunk
+            np.maximum.at(worst[k // 2], at, np.max(d * inv[k], axis=1))
+            if k == 0:
+                np.maximum.at(speed, at, np.linalg.norm(np.diff(x, axis=0)[-at.shape[0] :], axis=1) * f)
+        tail = x[-3:]
+    return worst, speed
+
+
+def minima_holds(plan: Plan, s_seg: np.ndarray, window_s: float, widen: float) -> np.ndarray:
+    """``(k, 3)`` hold rows ``(s_lo, s_hi, v)`` that flatten ``plan``'s moving speed minima.
+
+    Averaged over ``W``, the speed at a V-shaped minimum becomes the mean of the faster speeds
+    around it — above the cap that made the minimum. Held flat for ``W`` (``v W`` of path, centred),
+    the average there is the minimum itself. ``widen`` scales the half-width ``v W / 2``.
+    """
+    v = np.concatenate([plan.v0, plan.v1[-1:]])
+    s = np.concatenate([s_seg, s_seg[-1:] + plan.length[-1:]])
+    lower = np.concatenate([[False], (v[1:-1] <= v[:-2]) & (v[1:-1] <= v[2:]), [False]]) & (v > 0)
+    r = widen * v[lower] * window_s / 2.0
+    return np.stack([s[lower] - r, s[lower] + r, v[lower]], axis=1)
+
+
+def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 12) -> SmoothPlan:
+    """Plan ``request`` with ``planner`` so that ``j_max`` ``(3,)`` (x, y, z) also holds at every tick.
+
+    The window is ``W = 2 A/J`` (the largest over the axes). The speed minima of the plan are held
+    flat for ``W`` (:func:`minima_holds`) and the program planned again. Where the averaged table
+    still breaks a limit — on curves, the ``3 K ṡ s̈ + K' ṡ³`` jerk terms — the spans there (and
+    their neighbours within the window's reach) get a lower feed cap, from the speed measured there
+    and the excess, and the program is planned again; if that stalls, the acceleration is scaled
+    down globally.
+    """
+    margin = 0.995
+    f = request.machine.tick_hz
+    spans = request.spans
+    span_s0 = np.cumsum(spans.length) - spans.length
+    feed = np.asarray(request.feed_mm_s, dtype=np.float64).copy()
+    debug = bool(os.environ.get("JAXCNC_DEBUG_JERK"))
+
+    def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, np.ndarray]:
+        a = request.a_max * alpha
+        base = planner(dataclasses.replace(request, a_max=a, feed_mm_s=feed, hold_caps=holds))
+        with np.errstate(invalid="ignore"):
+            ratio = np.where(np.isfinite(j_max) & np.isfinite(a), 2.0 * a / j_max, 0.0)
+        window = max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
+        sp = smooth(base, window, span_s0[base.span] + base.s_start, alpha)
+        # speeds are compared with the limit itself (no rounding to fear), a and j with the margin
+        worst, speed = span_peaks(sp, spans, request.v_max / margin, request.a_max, j_max)
+        return sp, worst, speed
+
+    alpha, holds, stretch = 1.0, None, 1.0
+    for it in range(iterations):
+        sp, worst, speed = attempt(feed, alpha, holds, stretch)
+        excess_a, excess_j = float(worst[0].max()), float(worst[1].max())
+        if debug:
+            print(
+                f"jerk stage {it}: v/a {excess_a:.4f}, j {excess_j:.4f} (on {(worst[1] > margin).sum()} spans), "
+                f"alpha {alpha:.4f}, {sp.total_time_s:.4f} s"
+            )
+        if max(excess_a, excess_j) <= margin:
+            return sp
+        rows = minima_holds(sp.base, span_s0[sp.base.span] + sp.base.s_start, sp.window_ticks / f, 1.0)
+        holds = rows if holds is None else np.concatenate([holds, rows])
+        if it == 0:
+            continue  # first let the held minima act
+        if excess_a > margin:
+            # the averaged acceleration on curves (T and K vary across the window): less of it everywhere
+            alpha *= float(np.clip(margin / excess_a, 0.7, 0.995))
+        bad = np.flatnonzero(worst[1] > margin)
+        if bad.size and stretch < 2.0:
+            # a longer window first: it costs its length once per rest-to-rest group
+            stretch *= min(1.25, excess_j / margin * 1.01)
+        elif bad.size:
+            # jerk from the curvature's change (K' ṡ³, 3 K ṡ s̈; it grows like v³): slow those spans and
+            # their neighbours to the speed measured there times a cube-root share of the excess
+            factor = np.clip((margin / worst[1][bad]) ** (1.0 / 3.0), 0.5, 0.97)
+            cap = np.full(len(spans), np.inf)
+            for di in (-1, 0, 1):
+                idx = np.clip(bad + di, 0, len(spans) - 1)
+                np.minimum.at(cap, idx, np.maximum(speed[bad], 1e-3) * factor)
+            feed = np.minimum(feed, cap)
+    for _ in range(8):  # fall back: the whole program's acceleration scaled down further
+        alpha *= 0.7
+        sp, worst, _ = attempt(feed, alpha, holds, stretch)
+        if worst.max() <= margin:
+            return sp
+    raise ValueError("no plan keeps the jerk limits (is j_max tiny against a_max and the tick rate?)")
