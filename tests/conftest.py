@@ -44,9 +44,18 @@ chord_tol_mm = 0.001
 
 
 def machine_text(
-    tick_hz: float = 10000, v: float = 100.0, a: float = 1000.0, a_y: float | None = None, rapid: float = 100.0
+    tick_hz: float = 10000,
+    v: float = 100.0,
+    a: float = 1000.0,
+    a_y: float | None = None,
+    rapid: float = 100.0,
+    j: float | None = None,
 ) -> str:
-    return MACHINE_TOML.format(tick_hz=tick_hz, v=v, a=a, a_y=a if a_y is None else a_y, rapid=rapid)
+    """The test machine; ``j``: a jerk limit (mm/s³) on every axis."""
+    text = MACHINE_TOML.format(tick_hz=tick_hz, v=v, a=a, a_y=a if a_y is None else a_y, rapid=rapid)
+    if j is not None:
+        text = "\n".join(ln + (f"\nj_max = {j:g}" if ln.startswith("a_max") else "") for ln in text.splitlines()) + "\n"
+    return text
 
 
 def make_machine(**kw) -> MachineConfig:
