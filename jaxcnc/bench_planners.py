@@ -64,7 +64,11 @@ def measured(job, machine: MachineConfig, folder: Path, name: str) -> tuple[floa
 
 
 def run_planner_benchmarks(
-    fine_points: int = 16_000, coarse: tuple[int, ...] = (100, 500, 2000), v: float = 100.0, a: float = 1000.0
+    fine_points: int = 16_000,
+    coarse: tuple[int, ...] = (100, 500, 2000),
+    v: float = 100.0,
+    a: float = 1000.0,
+    jerks: tuple[float, ...] = (1e5, 1e6),
 ) -> dict:
     """Run and print the comparison; return the figures."""
     from jaxcnc.planners.casadi_ref import casadi_planner
@@ -106,4 +110,39 @@ def run_planner_benchmarks(
             f"{r['violations']:10d} {r['wall_s']:7.2f}"
         )
     print(f"  topp steady (compiled) planning: {first['steady_s']:.3f} s")
-    return {"rows": rows, "reference_s": ref}
+    jerk_rows = run_jerk_benchmarks(prog, v, a, ref, jerks, fine_points)
+    return {"rows": rows, "reference_s": ref, "jerk": jerk_rows}
+
+
+def run_jerk_benchmarks(prog, v: float, a: float, free_s: float, jerks: tuple[float, ...], fine_points: int) -> list:
+    """The same program with ``j_max`` on x and y: jaxcnc (verified at every tick) beside CasADi's NLP."""
+    from jaxcnc.planners.casadi_ref import casadi_planner
+
+    register_planner("bench-casadi-jerk")(casadi_planner(fine_points))
+    print(f"  with jerk limits (acceleration-limited optimum, CasADi above: {free_s:.4f} s)")
+    print(
+        f"  {'j_max mm/s³':>12s} {'planner':28s} {'time s':>8s} {'/ a-only':>9s} {'max|j|/j_max':>13s} "
+        f"{'violations':>10s}"
+    )
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for j in jerks:
+            text = MACHINE.format(v=v, a=a, feed=v).replace(f"a_max = {a}\n", f"a_max = {a}\nj_max = {j}\n")
+            machine = parse_machine(text, "<bench>")
+            for label, planner in (
+                ("jaxcnc topp + S-curve stage", "topp"),
+                (f"CasADi/IPOPT {fine_points} pts", "bench-casadi-jerk"),
+            ):
+                t0 = time.perf_counter()
+                job = plan_job(prog, machine, planner)
+                wall = time.perf_counter() - t0
+                path = write_table(job, Path(tmp) / f"j{planner}.ticks", progress=False, planner=planner)
+                meas = measure_table(TableFile(path), machine)
+                factor = max(meas.max_abs_j[x] / j for x in ("x", "y"))
+                t = job.plan.total_time_s
+                print(f"  {j:12.0f} {label:28s} {t:8.4f} {t / free_s:9.4f} {factor:13.3f} {len(meas.violations):10d}")
+                out.append(
+                    dict(j_max=j, label=label, time_s=t, factor=factor, violations=len(meas.violations), wall_s=wall)
+                )
+    print("  (CasADi's jerk rows act on its grid; its plan holds s̈ constant per interval, so its table steps s̈)")
+    return out
