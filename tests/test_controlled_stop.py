@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -76,15 +75,21 @@ def test_player_request_stop_from_another_thread(tmp_path):
     assert np.all(rec[-1] == rec[-2])
 
 
-def test_ctrl_c_in_jaxcnc_play_is_a_controlled_stop(tmp_path):
+def _start_play(tmp_path, *extra: str, stdin=None):
+    """A real ``jaxcnc play -m`` process on the long line in real time; ``(process, table, recording path)``."""
     machine = tmp_path / "m.toml"
     machine.write_text(machine_text())
-    m = make_machine()
-    _, table, _ = table_of(PROGRAM, m, tmp_path, "long.ticks")
+    _, table, _ = table_of(PROGRAM, make_machine(), tmp_path, "long.ticks")
     rec = tmp_path / "rec.npy"
     cmd = [sys.executable, "-m", "jaxcnc.cli.main", "play", str(tmp_path / "long.ticks"), "--sink", "sim"]
-    cmd += ["--realtime", "--record", str(rec), "-m", str(machine), "-q"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    cmd += ["--realtime", "--record", str(rec), "-m", str(machine), *extra]
+    proc = subprocess.Popen(cmd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, table, rec
+
+
+def test_ctrl_c_in_jaxcnc_play_is_a_controlled_stop(tmp_path):
+    m = make_machine()
+    proc, table, rec = _start_play(tmp_path, "-q")
     time.sleep(2.0)  # start-up, then about a second of motion
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
@@ -100,14 +105,8 @@ def test_ctrl_c_in_jaxcnc_play_is_a_controlled_stop(tmp_path):
 
 def test_jaxcnc_play_takes_hold_resume_and_override_from_a_pipe(tmp_path):
     """Operator controls on the command line: hold at full speed, resume at 50 %, to the end."""
-    machine = tmp_path / "m.toml"
-    machine.write_text(machine_text())
     m = make_machine()
-    _, table, _ = table_of(PROGRAM, m, tmp_path, "long.ticks")
-    rec = tmp_path / "rec.npy"
-    cmd = [sys.executable, "-m", "jaxcnc.cli.main", "play", str(tmp_path / "long.ticks"), "--sink", "sim"]
-    cmd += ["--realtime", "--record", str(rec), "-m", str(machine)]
-    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc, table, rec = _start_play(tmp_path, stdin=subprocess.PIPE)
     time.sleep(2.5)  # start-up, then about a second and a half of motion
     proc.stdin.write("hold\n")
     proc.stdin.flush()

@@ -68,14 +68,20 @@ def test_without_limits_the_drives_can_only_hold(line):
     assert np.all(pos[1000:] == rows[999])
 
 
-class _LatePlayerSink(SimSink):
-    """A real-time sim whose player stalls once, 1 s into the job, for 0.5 s."""
+class _StallsOnce:
+    """Mixed into a sink: the player stalls once, at tick ``stall_at``, for ``stall_s`` seconds."""
+
+    stall_at, stall_s = 10_000, 0.5
 
     def write(self, first_tick, rows, events):
-        if first_tick >= 10_000 and not getattr(self, "_stalled", False):
+        if first_tick >= self.stall_at and not getattr(self, "_stalled", False):
             self._stalled = True
-            time.sleep(0.5)
+            time.sleep(self.stall_s)
         super().write(first_tick, rows, events)
+
+
+class _LatePlayerSink(_StallsOnce, SimSink):
+    """A real-time sim whose player stalls once, 1 s into the job, for 0.5 s."""
 
 
 def test_sim_sink_reports_an_underrun_and_ramps_down(line):
@@ -91,12 +97,8 @@ def test_sim_sink_reports_an_underrun_and_ramps_down(line):
     _check_ramp(pos, table, a_max, m.discrete_mm, m.tick_hz)
 
 
-class _LateStreamSink(StreamSink):
-    def write(self, first_tick, rows, events):
-        if first_tick >= 20_000 and not getattr(self, "_stalled", False):
-            self._stalled = True
-            time.sleep(1.0)
-        super().write(first_tick, rows, events)
+class _LateStreamSink(_StallsOnce, StreamSink):
+    stall_at, stall_s = 20_000, 1.0
 
 
 def test_receiver_ramps_down_when_the_player_is_late_and_the_player_reports_it(line, tmp_path):

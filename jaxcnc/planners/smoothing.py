@@ -335,7 +335,7 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
         worst, speed = span_peaks(sp, spans, request.v_max / margin, request.a_max, j_max)
         return sp, worst, speed
 
-    alpha, holds, stretch = 1.0, None, 1.0
+    alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf
     for it in range(iterations):
         sp, worst, speed = attempt(feed, alpha, holds, stretch)
         excess_a, excess_j = float(worst[0].max()), float(worst[1].max())
@@ -356,10 +356,15 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
         is_curve = (spans.kind != SpanKind.LINE) & (spans.kind != SpanKind.POINT)
         near_curve = is_curve | np.concatenate([[False], is_curve[:-1]]) | np.concatenate([is_curve[1:], [False]])
         on_line = bad & ~near_curve
-        if on_line.any() and stretch < 2.5:
-            # on lines the jerk is T s⃛ alone: s̈ swung from +A to -A within the window; widen it
+        if widening and bad.any() and stretch < 2.0 and excess_j < 0.98 * previous_j:
+            # T s⃛ doubles where s̈ swings from +A to -A within the window: widen it while that helps
             # (it costs its length once per rest-to-rest group)
+            previous_j = excess_j
             stretch *= min(1.25, excess_j / margin * 1.01)
+            continue
+        widening = False
+        if on_line.any() and stretch < 2.5:
+            stretch *= min(1.25, excess_j / margin * 1.01)  # on lines the jerk is T s⃛ alone
         # a line's excess next to a curve is the curve's (its curvature's change at the junction)
         near = bad & near_curve
         curved = np.unique(
