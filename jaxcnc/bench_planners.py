@@ -122,7 +122,7 @@ def run_jerk_benchmarks(prog, v: float, a: float, free_s: float, jerks: tuple[fl
     print(f"  with jerk limits (acceleration-limited optimum, CasADi above: {free_s:.4f} s)")
     print(
         f"  {'j_max mm/s³':>12s} {'planner':28s} {'time s':>8s} {'/ a-only':>9s} {'max|j|/j_max':>13s} "
-        f"{'violations':>10s}"
+        f"{'violations':>10s} {'wall s':>7s}"
     )
     out = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -140,7 +140,10 @@ def run_jerk_benchmarks(prog, v: float, a: float, free_s: float, jerks: tuple[fl
                 meas = measure_table(TableFile(path), machine)
                 factor = max(meas.max_abs_j[x] / j for x in ("x", "y"))
                 t = job.plan.total_time_s
-                print(f"  {j:12.0f} {label:28s} {t:8.4f} {t / free_s:9.4f} {factor:13.3f} {len(meas.violations):10d}")
+                print(
+                    f"  {j:12.0f} {label:28s} {t:8.4f} {t / free_s:9.4f} {factor:13.3f} {len(meas.violations):10d} "
+                    f"{wall:7.2f}"
+                )
                 out.append(
                     dict(j_max=j, label=label, time_s=t, factor=factor, violations=len(meas.violations), wall_s=wall)
                 )
