@@ -75,3 +75,24 @@ def test_casadi_reference_with_jerk_rows(tmp_path):
     optimum = 20 / 50 + 2 * np.sqrt(50 / 10_000)  # v < A²/J: the ramps peak at sqrt(v J) < A
     assert t_free < t_jerk
     assert 0.9 * optimum < t_jerk < optimum
+
+
+def test_events_of_a_jerk_limited_job_fall_where_the_machine_rests(tmp_path):
+    """Laser switching at G0/G1 changes and a dwell: each event on a tick where the drives stand still."""
+    from jaxcnc.hw.tablefile import EventKind
+
+    m = make_machine(a=1000, j=20_000)
+    text = "G0 X5\nM3 S500\nG1 X15 F1200\nG4 P0.1\nG1 Y5\nM5\nG0 X0 Y0\nM2\n"
+    job, table, meas = table_of(text, m, tmp_path)
+    assert isinstance(job.plan, SmoothPlan) and meas.ok, meas.violations[:3]
+    p = table.exact_mm()
+    ev = table.events
+    laser = ev[ev["kind"] == EventKind.LASER]
+    assert list(laser["value"] > 0) == [True, False]
+    for tick in np.concatenate([laser["tick"], ev[ev["kind"] == EventKind.DWELL]["tick"]]):
+        k = int(min(tick, len(p) - 2))
+        # (a nanometre: the averaged approach ends in a cubic tail of picometres)
+        assert np.abs(p[k + 1] - p[k]).max() < 1e-6 and np.abs(p[k] - p[max(k - 1, 0)]).max() < 1e-6
+    # the laser comes on at X5 (after the rapid) and goes off at X15 Y5
+    np.testing.assert_allclose(p[int(laser["tick"][0]), :2], [5, 0], atol=1e-9)
+    np.testing.assert_allclose(p[int(laser["tick"][1]), :2], [15, 5], atol=1e-9)

@@ -336,6 +336,7 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
         return sp, worst, speed
 
     alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf
+    widen, best_j, stalled = HOLD_WIDEN, np.inf, 0
     for it in range(iterations):
         sp, worst, speed = attempt(feed, alpha, holds, stretch)
         excess_a, excess_j = float(worst[0].max()), float(worst[1].max())
@@ -345,7 +346,17 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
         )
         if max(excess_a, excess_j) <= margin:
             return sp
-        rows = minima_holds(sp.base, span_s0[sp.base.span] + sp.base.s_start, sp.window_ticks / f, HOLD_WIDEN)
+        if not widening:
+            if excess_j < 0.98 * best_j:
+                best_j, stalled = excess_j, 0
+            else:
+                # the caps do not reach it: the window still averages in the faster speeds around a
+                # slow place, so hold the minima flat over more of the window
+                stalled += 1
+                widen = min(2.0 * widen, 1.0)
+                if stalled > 4:
+                    break
+        rows = minima_holds(sp.base, span_s0[sp.base.span] + sp.base.s_start, sp.window_ticks / f, widen)
         holds = rows if holds is None else np.concatenate([holds, rows])
         if it == 0:
             continue  # first let the held minima act
@@ -383,10 +394,17 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
                 np.minimum.at(cap, idx, np.maximum(speed[curved], 1e-3) * factor)
             cap[spans.kind == SpanKind.LINE] = np.inf  # a line next to a curve keeps its cruise
             feed = np.minimum(feed, cap)
-    for _ in range(20):  # fall back: the whole program slower (jerk falls like v³ on curves, v² A on lines)
-        alpha, feed = alpha * 0.8, np.minimum(feed, speed.max()) * 0.8
-        sp, worst, speed = attempt(feed, alpha, holds, stretch)
-        log.debug("jerk fallback: v/a %.4f, j %.4f, %.4f s", worst[0].max(), worst[1].max(), sp.total_time_s)
-        if worst.max() <= margin:
-            return sp
+    best = None  # fall back: the whole program slower (jerk falls like v³ on curves, v² A on lines)
+    for use_holds in (holds, None):
+        a_fb, feed_fb, speed_fb = alpha, feed, speed
+        for _ in range(12):
+            a_fb, feed_fb = a_fb * 0.8, np.minimum(feed_fb, speed_fb.max()) * 0.8
+            sp, worst, speed_fb = attempt(feed_fb, a_fb, use_holds, stretch)
+            log.debug("jerk fallback: v/a %.4f, j %.4f, %.4f s", worst[0].max(), worst[1].max(), sp.total_time_s)
+            if worst.max() <= margin:
+                if best is None or sp.total_time_s < best.total_time_s:
+                    best = sp
+                break
+    if best is not None:
+        return best
     raise ValueError("no plan keeps the jerk limits (is j_max tiny against a_max and the tick rate?)")

@@ -42,6 +42,8 @@ MAX_REFINE = 6
 REFINE_FACTOR = 4
 #: Stand-in for an infinite limit (absent axis) that keeps the eliminations free of inf - inf.
 BIG = 1e30
+#: Most intervals a line is cut into so that a hold inside it has nodes (see :func:`hold_counts`).
+MAX_HOLD_CUTS = 4096
 #: Share of an axis' jerk limit the curvature's change may take at constant speed (see :func:`jerk_cap`).
 JERK_SHARE = 0.5
 
@@ -151,7 +153,7 @@ def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarra
 def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
     spans = req.spans
-    counts = initial_counts(req)
+    counts = hold_counts(req, initial_counts(req))
     arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all rounds
     for _ in range(MAX_REFINE):
         grid = build_grid(spans, counts, arrays)
@@ -163,6 +165,29 @@ def plan_topp(req: PlanRequest) -> Plan:
     else:
         raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
     return plan_from_outputs(out, grid.delta, grid.span, grid.s_start, req.machine.tick_hz)
+
+
+def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
+    """Cut lines that a hold reaches into intervals of half the hold's width (at most ``MAX_HOLD_CUTS``).
+
+    A line is one grid interval: a hold inside it would have no node to act on, and the line's
+    trapezoid would speed up right where the speed must stay flat.
+    """
+    if req.hold_caps is None or len(req.hold_caps) == 0:
+        return counts
+    spans = req.spans
+    span_s0 = np.cumsum(spans.length) - spans.length
+    rows = np.asarray(req.hold_caps, dtype=np.float64)
+    first = np.clip(np.searchsorted(span_s0, rows[:, 0], side="right") - 1, 0, len(spans) - 1)
+    last = np.clip(np.searchsorted(span_s0, rows[:, 1], side="right") - 1, 0, len(spans) - 1)
+    n = last - first + 1
+    which = np.repeat(np.arange(rows.shape[0]), n)
+    span = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + first[which]
+    width = np.full(len(spans), np.inf)
+    np.minimum.at(width, span, np.maximum(rows[which, 1] - rows[which, 0], 1e-9))
+    line = (spans.kind == SpanKind.LINE) & np.isfinite(width)
+    cuts = np.ceil(spans.length / (0.5 * np.where(line, width, 1.0))).astype(np.int64)
+    return np.where(line, np.maximum(counts, np.minimum(cuts, MAX_HOLD_CUTS)), counts)
 
 
 def node_holds(req: PlanRequest, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
