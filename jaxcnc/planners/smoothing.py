@@ -354,6 +354,7 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
                 # slow place, so hold the minima flat over more of the window
                 stalled += 1
                 widen = min(2.0 * widen, 1.0)
+                stretch = min(2.5, stretch * 1.25)  # and s̈ swinging between a slow place's ramps
                 if stalled > 4:
                     break
         rows = minima_holds(sp.base, span_s0[sp.base.span] + sp.base.s_start, sp.window_ticks / f, widen)
