@@ -17,9 +17,10 @@ finds such places and stretches ``W`` (up to 2.5×). Each group starts and ends 
 average runs per group and a moving group grows by ``W`` (whole ticks: rest points stay on ticks).
 
 On curves the axis jerk also has ``3 K ṡ s̈ + K' ṡ³`` terms, and the averaged speed near a slow
-point can exceed the slow point's cap; :func:`jerk_limited` therefore plans with the acceleration
-scaled by ``α`` and measures the result at every tick (exact positions, finite differences),
-bisecting for the largest ``α`` whose table keeps every limit.
+point can exceed the slow point's cap; :func:`jerk_limited` therefore holds the plan's speed minima
+flat, measures the result at every tick (exact positions, finite differences) and re-plans with
+local remedies (a wider window, lower feeds on the offending curves, less acceleration) until every
+limit holds — with a global slow-down as the last resort, so it always ends with a valid plan.
 
 ``s_W`` is evaluated in closed form: ``A(t) = ∫_0^t s`` of a trapezoid segment is a piecewise cubic,
 and ``s_W = (A(t) - A(t - W)) / W`` per group.
