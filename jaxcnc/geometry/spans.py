@@ -95,6 +95,11 @@ class Spans:
         return int(self.coeffs.shape[1] - 1)
 
     @property
+    def s0(self) -> np.ndarray:
+        """``(n,)`` mm, path length from the program start to each span's start."""
+        return np.cumsum(self.length) - self.length
+
+    @property
     def start(self) -> np.ndarray:
         """``(n, 3)`` start points (``u = 0``)."""
         c = self.coeffs[:, 0, :]

@@ -111,11 +111,11 @@ def plan_job(program: Program, machine: MachineConfig, planner: str = DEFAULT_PL
     lim = machine.limits(PROGRAM_AXES)
     v_max = np.where(np.isnan(lim["v_max"]), np.inf, lim["v_max"])
     a_max = np.where(np.isnan(lim["a_max"]), np.inf, lim["a_max"])
-    request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine)
     j_max = np.where(np.isnan(lim["j_max"]), np.inf, lim["j_max"])
+    request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)
     fn = get_planner(planner)
     if np.any(np.isfinite(j_max)) and not getattr(fn, "handles_jerk", False):
-        plan = jerk_limited(request, fn, j_max)  # jerk limits: the planner's time law averaged (an S-curve)
+        plan = jerk_limited(request, fn)  # jerk limits: the planner's time law averaged (an S-curve)
     else:
         plan = fn(request)
     return PlannedJob(

@@ -19,7 +19,6 @@ from jaxcnc.planners.grid import Grid, build_grid
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions
 from jaxcnc.planners.registry import PlanRequest
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
-from jaxcnc.program import PROGRAM_AXES
 
 #: Grid points of a reference plan unless the request's machine says otherwise.
 DEFAULT_POINTS = 16_000
@@ -76,8 +75,7 @@ def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
     rest_nodes = np.unique(first_node[rest_span])
     pieces = [(int(a), int(b)) for a, b in zip(rest_nodes[:-1], rest_nodes[1:], strict=True) if s[b] > s[a]]
     keep = 1.0 - NUMERIC_MARGIN
-    j_max = req.machine.limits(PROGRAM_AXES)["j_max"]
-    j_max = np.where(np.isnan(j_max), np.inf, j_max) * keep
+    j_max = (np.full(3, np.inf) if req.j_max is None else req.j_max) * keep
     return RefProblem(grid, s, t, k, feed, pieces, req.v_max * keep, req.a_max * keep, j_max)
 
 

@@ -28,6 +28,7 @@ class PlanRequest:
         stop_before: ``(n,)`` bool, the motion must be at rest where the span starts.
         v_max, a_max: ``(3,)`` limits of the x, y, z axes (``inf`` where the machine lacks one).
         machine: the machine (tick rate, tolerances, ...).
+        j_max: optional ``(3,)`` jerk limits of the x, y, z axes (``inf`` where unset or absent).
         hold_caps: optional ``(k, 3)`` rows ``(s_lo, s_hi, v)``: the speed stays ≤ ``v`` mm/s
             between path lengths ``s_lo`` and ``s_hi`` mm from the program start (the jerk stage asks
             for flat speed minima this way; planners that cannot honour it ignore it).
@@ -40,6 +41,7 @@ class PlanRequest:
     v_max: np.ndarray
     a_max: np.ndarray
     machine: MachineConfig
+    j_max: np.ndarray | None = None
     hold_caps: np.ndarray | None = None
 
 

@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.evaluate import evaluate_spans
 from jaxcnc.geometry.inverse import span_arrays, u_of_s
 from jaxcnc.geometry.spans import SpanKind, pad_spans
@@ -113,10 +114,7 @@ class SmoothPlan:
 
     @cached_property
     def _device(self) -> dict[str, jnp.ndarray]:
-        return self.device_arrays()
-
-    def device_arrays(self) -> dict[str, jnp.ndarray]:
-        """The arrays :func:`s_of_ticks` reads (segments padded to a bucket size)."""
+        """The arrays :func:`s_of_ticks` reads (segments padded to a bucket size), uploaded once."""
         base = self.base
         n = len(base)
         m = bucket_size(n)
@@ -212,10 +210,11 @@ def _segment_integral_np(plan: Plan) -> np.ndarray:
 
 def smooth(plan: Plan, window_ticks: int, s_start_of_segment: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
     """Average ``plan``'s groups over ``window_ticks`` ticks; ``s_start_of_segment``: global s at each segment start."""
-    starts = np.flatnonzero(np.concatenate([[True], plan.group_tick[1:] != plan.group_tick[:-1]]))
+    first = np.concatenate([[True], plan.group_tick[1:] != plan.group_tick[:-1]])  # a group's first segment
+    starts = np.flatnonzero(first)
     g_start = plan.group_tick[starts].astype(np.int64)
     g_ticks = np.diff(np.concatenate([g_start, [plan.n_ticks]])).astype(np.int64)
-    group = np.cumsum(np.isin(np.arange(len(plan)), starts)) - 1
+    group = np.cumsum(first) - 1
     g_s0 = s_start_of_segment[starts]
     g_len = np.bincount(group, weights=plan.length, minlength=starts.size)
     seg_s_in_group = s_start_of_segment - g_s0[group]
@@ -246,7 +245,7 @@ def span_starts(spans) -> tuple[dict, jnp.ndarray]:
     """Device arrays of ``spans`` padded to a bucket and each span's start ``s`` (padding: never found)."""
     n = len(spans)
     padded = pad_spans(spans, bucket_size(n))
-    span_s0 = np.cumsum(padded.length) - padded.length
+    span_s0 = padded.s0
     span_s0[n:] = np.inf
     return span_arrays(padded), jnp.asarray(span_s0)
 
@@ -309,20 +308,21 @@ def minima_holds(plan: Plan, s_seg: np.ndarray, window_s: float, widen: float) -
     return np.stack([s[lower] - r, s[lower] + r, v[lower]], axis=1)
 
 
-def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> SmoothPlan:
-    """Plan ``request`` with ``planner`` so that ``j_max`` ``(3,)`` (x, y, z) also holds at every tick.
+def jerk_limited(request, planner, iterations: int = 30) -> SmoothPlan:
+    """Plan ``request`` with ``planner`` so that its ``j_max`` ``(3,)`` (x, y, z) also holds at every tick.
 
     The window starts at ``W = A/J`` (the largest over the axes). The speed minima of the plan are held
-    flat for ``W`` (:func:`minima_holds`) and the program planned again. Where the averaged table
-    still breaks a limit — on curves, the ``3 K ṡ s̈ + K' ṡ³`` jerk terms — the spans there (and
-    their neighbours within the window's reach) get a lower feed cap, from the speed measured there
-    and the excess, and the program is planned again; if that stalls, the acceleration is scaled
-    down globally.
+    flat (:func:`minima_holds`) and the program planned again. Where the averaged table still breaks a
+    limit, jerk excess first widens the window (up to 2×) while that helps; then, on curves and at
+    their junctions (the ``3 K ṡ s̈ + K' ṡ³`` terms), those spans and their curved neighbours get a lower
+    feed cap from the speed measured there and the excess; acceleration excess scales the acceleration
+    down. If that stalls, a global slow-down ends the search with a valid plan, or a
+    :class:`~jaxcnc.errors.PlanningError`.
     """
     margin = 1.0 - 1e-6  # the table is sampled from these very positions; the verifier allows its rounding
     f = request.machine.tick_hz
-    spans = request.spans
-    span_s0 = np.cumsum(spans.length) - spans.length
+    spans, j_max = request.spans, request.j_max
+    span_s0 = spans.s0
     feed = np.asarray(request.feed_mm_s, dtype=np.float64).copy()
 
     def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, np.ndarray]:
@@ -409,4 +409,7 @@ def jerk_limited(request, planner, j_max: np.ndarray, iterations: int = 30) -> S
                 break
     if best is not None:
         return best
-    raise ValueError("no plan keeps the jerk limits (is j_max tiny against a_max and the tick rate?)")
+    raise PlanningError(
+        f"{request.machine.source}: no plan keeps the jerk limits j_max = {j_max} mm/s³ "
+        "(is j_max tiny against a_max and the tick rate?)"
+    )

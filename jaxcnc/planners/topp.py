@@ -35,7 +35,6 @@ from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
 from jaxcnc.planners.trapezoid import MOVING_MM, bucket_size, pad_rows
-from jaxcnc.program import PROGRAM_AXES
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -176,13 +175,11 @@ def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
     if req.hold_caps is None or len(req.hold_caps) == 0:
         return counts
     spans = req.spans
-    span_s0 = np.cumsum(spans.length) - spans.length
+    span_s0 = spans.s0
     rows = np.asarray(req.hold_caps, dtype=np.float64)
     first = np.clip(np.searchsorted(span_s0, rows[:, 0], side="right") - 1, 0, len(spans) - 1)
     last = np.clip(np.searchsorted(span_s0, rows[:, 1], side="right") - 1, 0, len(spans) - 1)
-    n = last - first + 1
-    which = np.repeat(np.arange(rows.shape[0]), n)
-    span = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + first[which]
+    which, span = _ranges(first, last - first + 1)
     width = np.full(len(spans), np.inf)
     np.minimum.at(width, span, np.maximum(rows[which, 1] - rows[which, 0], 1e-9))
     line = (spans.kind == SpanKind.LINE) & np.isfinite(width)
@@ -196,21 +193,21 @@ def node_holds(req: PlanRequest, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     hold_a, hold_b = np.full(m, np.inf), np.full(m, np.inf)
     if req.hold_caps is None or len(req.hold_caps) == 0:
         return hold_a, hold_b
-    span_s0 = np.cumsum(req.spans.length) - req.spans.length
-    s_a = span_s0[grid.span] + grid.s_start
+    s_a = req.spans.s0[grid.span] + grid.s_start  # nodes in path order: sorted
     s_b = s_a + grid.delta
     rows = np.asarray(req.hold_caps, dtype=np.float64)
     for s_node, hold in ((s_a, hold_a), (s_b, hold_b)):
-        order = np.argsort(s_node, kind="stable")
-        lo = np.searchsorted(s_node[order], rows[:, 0], side="left")
-        hi = np.searchsorted(s_node[order], rows[:, 1], side="right")
-        count = np.maximum(hi - lo, 0)
-        if count.sum() == 0:
-            continue
-        which = np.repeat(np.arange(rows.shape[0]), count)
-        idx = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
-        np.minimum.at(hold, order[idx], rows[which, 2] ** 2)
+        lo = np.searchsorted(s_node, rows[:, 0], side="left")
+        hi = np.searchsorted(s_node, rows[:, 1], side="right")
+        which, idx = _ranges(lo, np.maximum(hi - lo, 0))
+        np.minimum.at(hold, idx, rows[which, 2] ** 2)
     return hold_a, hold_b
+
+
+def _ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Range ``k`` is ``lo[k] .. lo[k] + count[k] - 1``: ``(which, index)`` over all of them, flattened."""
+    which = np.repeat(np.arange(lo.size), count)
+    return which, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
 
 
 def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
@@ -241,8 +238,7 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         "stop_before": pad_rows(req.stop_before, nb, True),
     }
     keep = 1.0 - NUMERIC_MARGIN
-    j_max = machine.limits(PROGRAM_AXES)["j_max"]
-    j_max = np.where(np.isnan(j_max), np.inf, j_max)
+    j_max = req.j_max
     out = plan_grid(
         g,
         sp,
@@ -251,6 +247,6 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         machine.path.chord_tol_mm,
         machine.tick_hz,
         curved_any=bool(grid.curved.any()),
-        j_max=jnp.asarray(j_max) if np.any(np.isfinite(j_max)) else None,
+        j_max=jnp.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}
