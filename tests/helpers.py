@@ -32,3 +32,21 @@ def table_of(
     path = write_table(job, folder / name, progress=False)
     table = TableFile(path)
     return job, table, measure_table(table, machine)
+
+
+def at_s(spans, idx: np.ndarray, s: np.ndarray, order: int = 0) -> list[np.ndarray]:
+    """Position and derivatives (NumPy) of spans ``idx`` at path parameter ``s`` from their starts."""
+    from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+
+    return list(evaluate_path(span_arrays(spans), np.asarray(idx), np.asarray(s, dtype=np.float64), order))
+
+
+def random_cubic_nurbs(n_points: int, seed: int = 0) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """A planar cubic NURBS with ``n_points`` control points winding through a 200 mm field."""
+    rng = np.random.default_rng(seed)
+    ang = np.cumsum(rng.normal(0.0, 0.25, n_points))
+    pts = np.cumsum(np.stack([np.cos(ang), np.sin(ang)], axis=1) * rng.uniform(1.0, 3.0, (n_points, 1)), axis=0)
+    pts = np.c_[pts - pts.mean(axis=0), np.zeros(n_points)]
+    w = rng.uniform(0.5, 2.0, n_points)
+    knots = np.concatenate([np.zeros(4), np.linspace(0, 1, n_points - 2)[1:-1], np.ones(4)])
+    return 3, pts, w, knots

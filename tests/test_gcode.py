@@ -386,25 +386,23 @@ def test_corpus_nurbs_programs_plan_and_check(tmp_path):
     ],
 )
 def test_arcs_in_each_plane(setup, arc, center, through):
-    import jax.numpy as jnp
-
     from jaxcnc.geometry import build_spans
-    from jaxcnc.geometry.evaluate import evaluate
+    from tests.helpers import at_s
 
     p = parse(f"{setup}\n{arc} F600\n")
     np.testing.assert_allclose(p.center[1], center, atol=1e-12)
     sp = build_spans(p)
     k = np.flatnonzero(sp.kind == 2)
     assert k.size == 1 and sp.length[k[0]] == pytest.approx(np.pi * 5, rel=1e-12)  # a quarter of r = 10
-    (mid,) = evaluate(jnp.asarray(sp.coeffs[k]), jnp.asarray(sp.origin[k]), jnp.asarray([0.5]))
-    np.testing.assert_allclose(np.asarray(mid)[0], through, atol=1e-6)  # the symmetric piece's middle
+    (mid,) = at_s(sp, k, sp.length[k] / 2)
+    np.testing.assert_allclose(mid[0], through, atol=1e-6)  # the arc's middle
 
 
 def test_helix_in_g18():
     from jaxcnc.geometry import build_spans
 
     sp = build_spans(parse("G18 G0 X10 Y0 Z0\nG2 X0 Z10 Y4 I-10 K0 F600\n"))
-    assert np.all(sp.kind[1:] == 3)  # rises along Y, the normal of the ZX plane
+    assert list(sp.kind) == [1, 2]  # the rapid, then an exact helix rising along Y (the normal of ZX)
     np.testing.assert_allclose(sp.end[-1], [0, 4, 10], atol=1e-12)
 
 

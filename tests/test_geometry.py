@@ -1,7 +1,8 @@
-"""Geometry: exact rational arcs, batched derivatives, exact lengths, closed-form u(s), extents."""
+"""Geometry: exact arcs and helices, batched derivatives in the path parameter, exact lengths, extents."""
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -10,39 +11,19 @@ from hypothesis import strategies as st
 
 from jaxcnc.gcode import parse_gcode
 from jaxcnc.geometry import SpanKind, build_spans
-from jaxcnc.geometry.evaluate import evaluate
-from jaxcnc.geometry.inverse import u_of_s
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from tests.helpers import at_s
 
 
-def spans_of(text: str):
-    return build_spans(parse_gcode(text, "g.ngc"))
+def spans_of(text: str, tol: float = 0.0):
+    return build_spans(parse_gcode(text, "g.ngc"), tol)
 
 
-def span_dict(spans):
-    from jaxcnc.geometry.inverse import span_arrays
-
-    return span_arrays(spans)
-
-
-def at_s(spans, idx: np.ndarray, s: np.ndarray, order: int = 0):
-    u = u_of_s(span_dict(spans), jnp.asarray(idx), jnp.asarray(s))
-    return u, [np.asarray(a) for a in evaluate(jnp.asarray(spans.coeffs[idx]), spans.origin[idx], u, order)]
-
-
-def ev(spans, idx, u, order=0):
-    return evaluate(jnp.asarray(spans.coeffs[idx]), jnp.asarray(spans.origin[idx]), jnp.asarray(u), order)
-
-
-def test_arcs_split_at_90_degrees_with_exact_lengths():
+def test_arcs_are_one_exact_span_each():
     sp = spans_of("G1 X10 F60\nG3 X10 Y0 I-10 J0\nG2 X30 Y0 R10\nG3 X40 Y10 I0 J10\n")
-    kinds = list(sp.kind)
-    assert kinds == [SpanKind.LINE] + [SpanKind.ARC] * 4 + [SpanKind.ARC] * 2 + [SpanKind.ARC]
-    np.testing.assert_allclose(sp.length[1:5].sum(), 2 * np.pi * 10, rtol=1e-15)
-    np.testing.assert_allclose(sp.length[5:7].sum(), np.pi * 10, rtol=1e-15)
-    np.testing.assert_allclose(sp.length[7], np.pi / 2 * 10, rtol=1e-15)
-    assert np.all(sp.half_angle[sp.kind == SpanKind.ARC] <= np.pi / 4 + 1e-15)
-    # consecutive spans join (end points evaluated from power-basis sums: rounding only)
-    np.testing.assert_allclose(sp.start[1:], sp.end[:-1], atol=1e-13)
+    assert list(sp.kind) == [SpanKind.LINE] + [SpanKind.ARC] * 3
+    np.testing.assert_allclose(sp.length[1:], [2 * np.pi * 10, np.pi * 10, np.pi / 2 * 10], rtol=1e-15)
+    np.testing.assert_allclose(sp.start[1:], sp.end[:-1], atol=1e-12)  # consecutive spans join
 
 
 @settings(max_examples=60, deadline=None)
@@ -56,75 +37,97 @@ def test_arcs_split_at_90_degrees_with_exact_lengths():
 )
 def test_arc_points_lie_on_circle_at_exact_arc_length(r, a0, sweep, cw, cx, cy):
     sgn = -1 if cw else 1
-    s0 = (cx + r * np.cos(a0), cy + r * np.sin(a0))
+    s0 = np.round((cx + r * np.cos(a0), cy + r * np.sin(a0)), 12)
     a1 = a0 + sgn * sweep
     e = (cx + r * np.cos(a1), cy + r * np.sin(a1))
-    s0 = np.round(s0, 12)
     text = (
         f"G0 X{s0[0]:.12f} Y{s0[1]:.12f}\n{'G2' if cw else 'G3'} X{e[0]:.12f} Y{e[1]:.12f} "
         f"I{cx - s0[0]:.12f} J{cy - s0[1]:.12f} F60\n"
     )
     sp = spans_of(text)
-    arcs = np.flatnonzero(sp.kind == SpanKind.ARC)
-    total = sp.length[arcs].sum()
-    np.testing.assert_allclose(total, r * sweep, rtol=1e-9, atol=1e-10)  # G-code written to 1e-12 mm
-    # points at arc length s from the arc's start sit at angle a0 + sgn * s / r
-    s_glob = np.linspace(0, total, 41)
-    cum = np.concatenate([[0], np.cumsum(sp.length[arcs])])
-    k = np.clip(np.searchsorted(cum, s_glob, side="right") - 1, 0, arcs.size - 1)
-    _, (p,) = at_s(sp, arcs[k], s_glob - cum[k])
-    ang = a0 + sgn * s_glob / r
+    (k,) = np.flatnonzero(sp.kind == SpanKind.ARC)
+    np.testing.assert_allclose(sp.length[k], r * sweep, rtol=1e-9, atol=1e-10)  # G-code written to 1e-12 mm
+    s = np.linspace(0, sp.length[k], 41)
+    (p,) = at_s(sp, np.full(41, k), s)
+    ang = a0 + sgn * s / r  # the point at arc length s from the start sits at this angle
     ref = np.stack([cx + r * np.cos(ang), cy + r * np.sin(ang)], axis=1)
     np.testing.assert_allclose(p[:, :2], ref, atol=1e-9 * max(1.0, r, abs(cx), abs(cy)))
 
 
-def test_derivatives_match_analytic_circle():
+def _finite_differences(sp, idx, s, length):
+    """Derivatives 1..3 of the path by central differences in s, each with a step suited to it."""
+
+    def at(x):
+        return at_s(sp, idx, x)[0]
+
+    h1, h2, h3 = (f * length[:, None] for f in (1e-5, 1e-3, 3e-3))
+    d1 = (at(s + h1[:, 0]) - at(s - h1[:, 0])) / (2 * h1)
+    d2 = (at(s + h2[:, 0]) - 2 * at(s) + at(s - h2[:, 0])) / h2**2
+    d3 = (at(s + 2 * h3[:, 0]) - 2 * at(s + h3[:, 0]) + 2 * at(s - h3[:, 0]) - at(s - 2 * h3[:, 0])) / (2 * h3**3)
+    return d1, d2, d3
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G1 X7 F60\nG3 X7 Y0 I-7 J0\n",  # a full circle
+        "G0 X5 Y0 Z0\nG3 X0 Y5 Z3 I-5 J0 F60\n",  # a helix
+        "G64 P0.2\nG1 X10 F60\nG1 X10 Y10\nG3 X20 Y10 R6\nG1 X25 Y0\n",  # blends with lines and an arc
+    ],
+)
+def test_derivatives_match_finite_differences(text):
+    sp = spans_of(text)
+    curved = np.flatnonzero(sp.curved)
+    idx = np.repeat(curved, 20)
+    s = np.tile(np.linspace(0.2, 0.8, 20), curved.size) * sp.length[idx]
+    _, d1, d2, d3 = at_s(sp, idx, s, order=3)
+    f1, f2, f3 = _finite_differences(sp, idx, s, sp.length[idx])
+    np.testing.assert_allclose(d1, f1, atol=1e-7)
+    np.testing.assert_allclose(d2, f2, atol=1e-5 * np.abs(d2).max())
+    np.testing.assert_allclose(d3, f3, atol=1e-3 * np.abs(d3).max())
+
+
+def test_arc_tangent_and_curvature_are_exact():
     r = 7.0
     sp = spans_of(f"G1 X{r} F60\nG3 X{r} Y0 I{-r} J0\n")
-    arcs = np.flatnonzero(sp.kind == SpanKind.ARC)
-    idx = np.repeat(arcs, 50)
-    s = np.tile(np.linspace(0, sp.length[arcs[0]], 50), arcs.size)
-    u, (p, d1, d2) = at_s(sp, idx, s, order=2)
-    # chain rule: dP/du = P'(s) ds/du; the tangent is perpendicular to the radius, |P'(s)| = 1
-    speed_u = np.linalg.norm(d1, axis=1)
-    np.testing.assert_allclose(np.einsum("ij,ij->i", d1[:, :2], p[:, :2]), 0, atol=1e-9)
-    # compare with central differences in u
-    h = 1e-6
-    uu = np.asarray(u)
-    (pp,) = ev(sp, idx, np.clip(uu + h, 0, 1))
-    (pm,) = ev(sp, idx, np.clip(uu - h, 0, 1))
-    inner = (uu > 2 * h) & (uu < 1 - 2 * h)
-    fd1 = (np.asarray(pp) - np.asarray(pm)) / (2 * h)
-    np.testing.assert_allclose(d1[inner], fd1[inner], rtol=1e-6, atol=1e-6)
-    (p1,) = ev(sp, idx, np.clip(uu + 1e-4, 0, 1))
-    (p0,) = ev(sp, idx, np.clip(uu - 1e-4, 0, 1))
-    fd2 = (np.asarray(p1) - 2 * p + np.asarray(p0)) / 1e-8
-    inner = (uu > 2e-4) & (uu < 1 - 2e-4)
-    np.testing.assert_allclose(d2[inner], fd2[inner], rtol=1e-4, atol=1e-4 * np.abs(d2).max())
-    # curvature |P' x P''| / |P'|^3 = 1/r everywhere on the arc
-    curv = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / speed_u**3
-    np.testing.assert_allclose(curv, 1 / r, rtol=1e-10)
+    (k,) = np.flatnonzero(sp.kind == SpanKind.ARC)
+    s = np.linspace(0, sp.length[k], 50)
+    p, d1, d2 = at_s(sp, np.full(50, k), s, order=2)
+    np.testing.assert_allclose(np.linalg.norm(d1, axis=1), 1.0, rtol=1e-14)  # unit speed
+    np.testing.assert_allclose(d2, -p / r**2, atol=1e-14)  # the curvature vector points to the centre
 
 
-def test_lines_are_uniform_in_u():
+def test_helix_is_exact():
+    r, rise = 5.0, 3.0
+    sp = spans_of(f"G0 X{r} Y0 Z0\nG3 X{r} Y0 Z{rise} I{-r} J0 F60\n")
+    (k,) = np.flatnonzero(sp.kind == SpanKind.ARC)
+    assert sp.length[k] == pytest.approx(np.hypot(2 * np.pi * r, rise), rel=1e-15)
+    s = np.linspace(0, sp.length[k], 200)
+    p, d1 = at_s(sp, np.full(200, k), s, order=1)
+    np.testing.assert_allclose(np.hypot(p[:, 0], p[:, 1]), r, rtol=1e-14)
+    ang = np.unwrap(np.arctan2(p[:, 1], p[:, 0]))
+    np.testing.assert_allclose(p[:, 2], rise * ang / (2 * np.pi), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(d1, axis=1), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(sp.end[k], [r, 0, rise], atol=1e-12)
+
+
+def test_lines_are_arc_length():
     sp = spans_of("G1 X3 Y4 Z12 F60\n")
     assert sp.length[0] == 13.0
     s = np.linspace(0, 13, 14)
-    u, (p,) = at_s(sp, np.zeros(14, int), s)
-    np.testing.assert_allclose(np.asarray(u), s / 13, rtol=1e-15)
+    (p,) = at_s(sp, np.zeros(14, int), s)
     np.testing.assert_allclose(p, np.outer(s / 13, [3, 4, 12]), atol=1e-13)
 
 
-def test_extents_are_exact():
-    sp = spans_of("G0 X10 Y0\nG3 X-10 Y0 I-10 J0 F60\nG3 X10 Y0 R10\n")
+def test_extents_are_exact_and_hold_every_point():
+    sp = spans_of("G0 X10 Y0\nG3 X-10 Y0 I-10 J0 F60\nG3 X10 Y0 R10\nG64 P0.3\nG1 X20 Y5\nG1 X25 Y-5\n")
     arcs = sp.kind == SpanKind.ARC
     lo, hi = sp.lo[arcs].min(axis=0), sp.hi[arcs].max(axis=0)
     np.testing.assert_allclose(lo[:2], [-10, -10], atol=1e-12)
     np.testing.assert_allclose(hi[:2], [10, 10], atol=1e-12)
-    # every span's extent contains densely sampled points of it
     idx = np.repeat(np.arange(len(sp)), 200)
     s = np.tile(np.linspace(0, 1, 200), len(sp)) * sp.length[idx]
-    _, (p,) = at_s(sp, idx, s)
+    (p,) = at_s(sp, idx, s)
     assert np.all(p >= sp.lo[idx] - 1e-9) and np.all(p <= sp.hi[idx] + 1e-9)
 
 
@@ -136,27 +139,47 @@ def test_points_for_dwell_and_events_zero_moves_dropped():
 
 
 @pytest.mark.parametrize("order", [0, 1, 2, 3])
-def test_evaluate_is_batched_and_jittable(order):
-    import jax
+def test_numpy_and_jitted_jax_evaluation_agree(order):
+    from jaxcnc.io.curves import curves_program
+    from tests.helpers import random_cubic_nurbs
 
-    sp = spans_of("G1 X1 F60\nG3 X0 Y1 I-1 J0\n")
-    f = jax.jit(lambda c, o, u: evaluate(c, o, u, order))
-    out = f(jnp.asarray(sp.coeffs[[0, 1, 1]]), jnp.asarray(sp.origin[[0, 1, 1]]), jnp.array([0.5, 0.0, 1.0]))
-    assert len(out) == order + 1 and out[0].shape == (3, 3)
-    np.testing.assert_allclose(np.asarray(out[0][2]), [0, 1, 0], atol=1e-15)
+    text = "G64 P0.1\nG1 X1 Y2 F60\nG3 X0 Y1 I-1 J0\nG2 X5 Y1 Z1 R3\nG1 X9 Y0\n"
+    parts = [spans_of(text)]
+    curve = random_cubic_nurbs(12, seed=1)
+    parts.append(build_spans(curves_program([curve], 10.0, start=curve[1][0])))
+    for sp in parts:
+        rng = np.random.default_rng(order)
+        idx = rng.integers(0, len(sp), 500)
+        s = rng.random(500) * sp.length[idx]
+        ref = evaluate_path(span_arrays(sp), idx, s, order)
+        f = jax.jit(lambda a, i, x: evaluate_path(a, i, x, order, xp=jnp))
+        out = f(span_arrays(sp, xp=jnp), jnp.asarray(idx), jnp.asarray(s))
+        for a, b in zip(ref, out, strict=True):
+            np.testing.assert_allclose(np.asarray(b), a, rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("order", [0, 1, 2, 3])
-def test_column_evaluation_equals_row_evaluation(order):
-    from jaxcnc.geometry.evaluate import evaluate_spans
-    from jaxcnc.geometry.inverse import span_arrays
+def test_polynomial_spans_meet_their_neighbours_with_unit_speed_and_curvature():
+    """At every joint q, q' and — where the geometry is G2 — q'' agree on both sides (blends, curve pieces)."""
+    from jaxcnc.io.curves import curves_program
+    from tests.helpers import random_cubic_nurbs
 
-    sp = spans_of("G1 X1 Y2 F60\nG3 X0 Y1 I-1 J0\nG2 X5 Y1 R3\n")
-    arrays = span_arrays(sp)
-    rng = np.random.default_rng(order)
-    idx = rng.integers(0, len(sp), 500)
-    u = rng.random(500)
-    rows = ev(sp, idx, u, order)
-    cols = evaluate_spans(arrays["coeffs_t"], arrays["origin_t"], jnp.asarray(idx), jnp.asarray(u), order)
-    for a, b in zip(rows, cols, strict=True):
-        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=1e-12)
+    curve = random_cubic_nurbs(30, seed=2)
+    for sp in (
+        build_spans(curves_program([curve], 10.0, start=curve[1][0])),
+        spans_of("G64 P0.05\nG1 X10 F60\nX10 Y10\nG2 X20 Y10 I5 J0\nG1 X30 Y0\nG3 X40 Y0 R6\nG2 X50 Y0 R7\n"),
+    ):
+        a = span_arrays(sp)
+        moving = np.flatnonzero((sp.kind[:-1] != SpanKind.POINT) & (sp.kind[1:] != SpanKind.POINT))
+        end = evaluate_path(a, moving, sp.length[moving], 2)
+        start = evaluate_path(a, moving + 1, np.zeros(moving.size), 2)
+        np.testing.assert_allclose(end[0], start[0], atol=1e-12)
+        np.testing.assert_allclose(np.linalg.norm(end[1], axis=1), 1.0, atol=1e-12)
+        np.testing.assert_allclose(np.linalg.norm(start[1], axis=1), 1.0, atol=1e-12)
+        np.testing.assert_allclose(end[1], start[1], atol=1e-9)
+        poly = np.isin(sp.kind[moving], (SpanKind.CURVE, SpanKind.BLEND)) | np.isin(
+            sp.kind[moving + 1], (SpanKind.CURVE, SpanKind.BLEND)
+        )
+        # no tangential part in q'' at a polynomial span's ends: the curvature vector alone
+        for d1, d2 in ((end[1][poly], end[2][poly]), (start[1][poly], start[2][poly])):
+            np.testing.assert_allclose(np.sum(d1 * d2, axis=1), 0.0, atol=1e-9 * max(1.0, np.abs(d2).max()))
+        np.testing.assert_allclose(end[2][poly], start[2][poly], atol=1e-9 * max(1.0, np.abs(end[2]).max()))

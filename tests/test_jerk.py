@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxcnc.bench import random_cubic_nurbs
 from jaxcnc.io.curves import curves_program
 from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.planners.smoothing import SmoothPlan
 from tests.conftest import make_machine
-from tests.helpers import table_of
+from tests.helpers import random_cubic_nurbs, table_of
 from tests.test_curves import table_of_program
 
 

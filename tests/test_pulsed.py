@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline
 
-from jaxcnc.bench_pulsed import glass_engraver
+from jaxcnc.bench.pulsed import glass_engraver
 from jaxcnc.cli.main import main
 from jaxcnc.errors import JaxcncError, MachineFileError, SourceError
 from jaxcnc.gcode import parse_gcode

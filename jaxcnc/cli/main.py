@@ -447,7 +447,9 @@ def cmd_expand(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from jaxcnc.bench import run_benchmarks, run_geometry_benchmarks, run_player_benchmarks
+    from jaxcnc.bench.geometry import run_geometry_benchmarks
+    from jaxcnc.bench.plan import run_benchmarks
+    from jaxcnc.bench.player import run_player_benchmarks
 
     if args.suite in ("all", "plan"):
         run_benchmarks(n_blocks=args.blocks, repeats=args.repeats)
@@ -456,11 +458,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.suite in ("all", "player"):
         run_player_benchmarks(seconds=args.seconds)
     if args.suite in ("all", "planners"):
-        from jaxcnc.bench_planners import run_planner_benchmarks
+        from jaxcnc.bench.planners import run_planner_benchmarks
 
         run_planner_benchmarks()
     if args.suite in ("all", "pulsed"):
-        from jaxcnc.bench_pulsed import run_pulsed_benchmarks
+        from jaxcnc.bench.pulsed import run_pulsed_benchmarks
 
         run_pulsed_benchmarks(programs=args.programs, check=args.check)
     return 0

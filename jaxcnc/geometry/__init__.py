@@ -1,5 +1,6 @@
-"""Geometry: blocks as batched rational Bézier spans, their evaluation, lengths and ``u(s)``."""
+"""Geometry: blocks as spans (lines, exact arcs and helices, NURBS pieces, corner blends), their evaluation."""
 
-from jaxcnc.geometry.spans import DEGREE_BUCKETS, SpanKind, Spans, build_spans
+from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.geometry.spans import DEGREE_BUCKETS, Spans, build_spans
 
 __all__ = ["DEGREE_BUCKETS", "SpanKind", "Spans", "build_spans"]

@@ -35,6 +35,14 @@ def homogeneous_power(points: np.ndarray, weights: np.ndarray, origin: np.ndarra
     return np.einsum("ki,sid->skd", bernstein_to_power_matrix(points.shape[1] - 1), hb)
 
 
+def power_to_bezier(coeffs: np.ndarray) -> np.ndarray:
+    """Relative homogeneous power-basis coefficients ``(S, p+1, 4)`` → Bézier control points ``(S, p+1, 3)``
+    (relative to the span origin), the inverse of :func:`homogeneous_power`."""
+    m = np.linalg.inv(bernstein_to_power_matrix(coeffs.shape[1] - 1))
+    hb = np.einsum("ik,skd->sid", m, coeffs)
+    return hb[..., :3] / hb[..., 3:]
+
+
 def elevate(coeffs: np.ndarray, degree: int) -> np.ndarray:
     """Pad power-basis coefficients ``(S, p+1, 4)`` to ``degree`` (exact: higher terms are zero)."""
     extra = degree + 1 - coeffs.shape[1]

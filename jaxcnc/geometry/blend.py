@@ -1,95 +1,231 @@
-"""Corner blending: the junction of two lines replaced by a G2-continuous curve within a tolerance.
+"""Corner blending: every junction the program allows, replaced by a G2 quintic within a tolerance.
 
-A corner ``C`` between an incoming line (unit direction ``t1``) and an outgoing one (``t2``),
-turning by ``θ``, is cut back by ``ℓ`` on both lines and joined by the quartic Bézier
+A junction between two spans (line–line, line–arc, arc–arc, helices; in 3D) that turns by ``θ`` is
+cut back by ``ℓ`` of arc length on both sides, at ``A`` on the incoming span (unit tangent ``Ta``,
+curvature vector ``Ka``) and ``B`` on the outgoing one (``Tb``, ``Kb``), and joined by the quintic
+Bézier of G2 Hermite interpolation with ``λ = 2ℓ``:
 
-    P0 = C - ℓ t1,  P1 = C - ℓ/2 t1,  P2 = C,  P3 = C + ℓ/2 t2,  P4 = C + ℓ t2.
+    P0 = A,  P1 = A + λ/5 Ta,  P2 = 2 P1 - P0 + λ²/20 Ka,
+    P5 = B,  P4 = B - λ/5 Tb,  P3 = 2 P4 - P5 + λ²/20 Kb.
 
-``P0, P1, P2`` lie on the first line and ``P2, P3, P4`` on the second, so the blend leaves and
-joins the lines with their tangents and with zero curvature (its second derivative vanishes at
-both ends): position, tangent and curvature are continuous (G2) and the planner needs no
-velocity step and no acceleration step at the joints. By symmetry the blend comes closest to
-``C`` at ``u = ½``, where ``B(½) = C + 3ℓ (t2 - t1) / 16``: the path moves at most
-``(3/8) ℓ sin(θ/2)`` from the corner, so ``ℓ = 8 tol / (3 sin(θ/2))`` keeps the deviation within
-``tol`` (and ``ℓ`` is at most half of either line, so neighbouring blends never overlap).
+Then ``P'(0) = λ Ta`` and ``P''(0) = λ² Ka`` (no tangential part), so with the timing polynomial of
+:mod:`jaxcnc.geometry.poly` the blend leaves ``A`` and joins ``B`` with the spans' own tangents and
+curvatures: position, tangent and curvature are continuous (G2), and the planner needs no velocity
+step and no acceleration step at the joints.
 
-Which junctions are blended: consecutive line rows (no span between them) with a tolerance —
-``G64 P`` of the second row, the machine's ``corner_tol_mm`` for ``G64`` without ``P``, none in
-exact-stop mode (G61) — that do not stop (no programmed stop before the second row) and keep the
-same rapid/feed state, laser mode and power (so laser switching points stay exactly where
-programmed). Junctions with arcs and curves keep their exact corners.
+Between two lines (``Ka = Kb = 0``) the control points lie on the two lines, the quintic is the
+degree-elevated quartic ``C - ℓ t1, C - ℓ/2 t1, C, C + ℓ/2 t2, C + ℓ t2`` (``C`` the corner), and by
+symmetry it comes closest to ``C`` at its middle, ``B(½) = C + 3ℓ (t2 - t1) / 16``: the path moves
+at most ``(3/8) ℓ sin(θ/2)`` from the corner, so ``ℓ = 8 tol / (3 sin(θ/2))`` keeps the deviation
+within ``tol``. Where an arc takes part the same ``ℓ`` is a first guess: the distance to the two
+replaced pieces is measured at 33 points of the blend (plus a bound of the curvature between
+them) and ``ℓ`` shrinks until it is within ``tol``. ``ℓ`` never exceeds half of either span, so
+neighbouring blends never overlap (a short line between two blends may be consumed entirely).
+
+Which junctions are blended: consecutive motion spans (lines, arcs; no dwell or event between
+them) with a tolerance — ``G64 P`` of the second row, the machine's ``corner_tol_mm`` for ``G64``
+without ``P`` (start-up mode), none in exact-path or exact-stop mode (G61, G61.1) — where the motion
+need not stop (no programmed stop before the second row: a laser switched on or off, a dwell, a
+pause) and the beam does not change: both lit with the same mode and power, or both dark (a rapid
+may then blend into a dark feed move). Junctions turning by more than ``MAX_TURN_RAD`` stop: a
+blend within the tolerance would be taken at a few mm/s there (its curvature radius falls below a
+micrometre), so the stop costs nothing. NURBS pieces keep their exact junctions (they are joined
+tangentially by the programs that write them).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from jaxcnc.geometry import poly
 from jaxcnc.geometry.bezier import homogeneous_power
-from jaxcnc.geometry.spans import MIN_LENGTH_MM, line_spans
-from jaxcnc.program import Kind, Program
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, Spans, assemble, merge_polys, poly_fields
+from jaxcnc.program import LaserMode, Program
 
-BLEND_DEGREE = 4
+BLEND_DEGREE = 5
 #: Turns below this are rounding (tangent continuity already); above the limit the motion stops.
 MIN_TURN_RAD = 1e-9
-MAX_TURN_RAD = np.deg2rad(179.0)
+MAX_TURN_RAD = np.deg2rad(150.0)
+#: Points of a blend where its distance to the replaced path is measured.
+N_DEVIATION = 33
+#: Rounds of shrinking a blend whose measured deviation exceeds the tolerance.
+SHRINK_ROUNDS = 8
 
 
-def blend_tolerances(program: Program, is_line: np.ndarray, corner_tol_mm: float) -> np.ndarray:
-    """``(n_rows,)`` blend tolerance (mm) of the junction *before* each row (0: exact corner)."""
-    producing = is_line | np.isin(program.kind, (Kind.ARC, Kind.CURVE, Kind.DWELL, Kind.EVENT))
-    rows = np.flatnonzero(producing)
-    tol = np.zeros(len(program))
-    if rows.size < 2:
-        return tol
-    r1, r2 = rows[:-1], rows[1:]
-    prog_tol = program.blend_tol[r2]
-    t = np.where(np.isinf(prog_tol), corner_tol_mm, prog_tol)
-    ok = (
-        is_line[r1]
-        & is_line[r2]
-        & ~program.stop_before[r2]
-        & (program.rapid[r1] == program.rapid[r2])
-        & (program.laser[r1] == program.laser[r2])
-        & (program.power[r1] == program.power[r2])
+def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) -> np.ndarray:
+    """``(n-1,)`` blend tolerance (mm) of each junction between consecutive spans (0: not blended)."""
+    n = len(spans)
+    if n < 2:
+        return np.zeros(0)
+    k1, k2 = spans.kind[:-1], spans.kind[1:]
+    r1, r2 = spans.block[:-1], spans.block[1:]
+    blendable = np.isin(k1, (SpanKind.LINE, SpanKind.ARC)) & np.isin(k2, (SpanKind.LINE, SpanKind.ARC))
+    lit = (program.laser != LaserMode.OFF) & ~program.rapid
+    same_beam = np.where(
+        lit[r1] & lit[r2],
+        (program.laser[r1] == program.laser[r2]) & (program.power[r1] == program.power[r2]),
+        ~lit[r1] & ~lit[r2],
     )
-    tol[r2] = np.where(ok, np.maximum(t, 0.0), 0.0)
-    return tol
+    prog_tol = program.blend_tol[r2]
+    tol = np.where(np.isinf(prog_tol), corner_tol_mm, prog_tol)
+    ok = blendable & (r1 != r2) & ~program.stop_before[r2] & same_beam & (tol > 0)
+    return np.where(ok, tol, 0.0)
 
 
-def corner_blends(
-    program: Program, line_rows: np.ndarray, tol: np.ndarray
-) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
-    """Trimmed line spans and the blends between them.
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from points ``p`` ``(J, Q, 3)`` to segments ``a``–``b`` ``(J, 3)``."""
+    ab = b - a
+    den = np.maximum(np.sum(ab * ab, axis=1), 1e-300)[:, None]
+    t = np.clip(np.sum((p - a[:, None]) * ab[:, None], axis=2) / den, 0.0, 1.0)
+    return np.linalg.norm(p - (a[:, None] + t[..., None] * ab[:, None]), axis=2)
 
-    Args:
-        line_rows: ``(k,)`` rows that are lines, in order; tol: ``(n_rows,)`` from
-            :func:`blend_tolerances`.
-    Returns:
-        the line spans' fields (trimmed, lines trimmed to nothing dropped) and the blends as
-        ``(coeffs (b, 5, 4), origin (b, 3), row (b,))`` — each blend owned by the row after its
-        corner — or ``None`` when no corner is blended.
+
+def _piece_distance(p: np.ndarray, spans: Spans, idx: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray) -> np.ndarray:
+    """Distance from ``p`` ``(J, Q, 3)`` to the part ``[s_lo, s_hi]`` of spans ``idx`` (lines and arcs).
+
+    On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
+    on a circle; an upper bound on a helix, whose tiny parts barely rise).
     """
-    a, b = program.start[line_rows].copy(), program.end[line_rows].copy()
-    length = np.linalg.norm(b - a, axis=1)
-    t = (b - a) / length[:, None]
-    j_tol = tol[line_rows[1:]]  # junction i: between line i and line i+1 (tol 0 unless adjacent)
-    cos_turn = np.clip(np.sum(t[:-1] * t[1:], axis=1), -1.0, 1.0)
-    turn = np.arccos(cos_turn)
-    blend = (j_tol > 0) & (turn > MIN_TURN_RAD) & (turn < MAX_TURN_RAD)
-    half = np.sin(turn / 2)
-    ell = np.where(blend, 8.0 * j_tol / (3.0 * np.where(blend, half, 1.0)), 0.0)
-    ell = np.minimum(ell, 0.5 * np.minimum(length[:-1], length[1:]))
-    blend &= ell > MIN_LENGTH_MM
-    ell = np.where(blend, ell, 0.0)
-    corner = b[:-1].copy()
-    a[1:] += ell[:, None] * t[1:]
-    b[:-1] -= ell[:, None] * t[:-1]
-    keep = np.linalg.norm(b - a, axis=1) > MIN_LENGTH_MM
-    lines = line_spans(a[keep], b[keep], line_rows[keep])
-    if not blend.any():
-        return lines, None
-    j = np.flatnonzero(blend)
-    c, t1, t2, e = corner[j], t[j], t[j + 1], ell[j][:, None]
-    pts = np.stack([c - e * t1, c - 0.5 * e * t1, c, c + 0.5 * e * t2, c + e * t2], axis=1)
-    coeffs = homogeneous_power(pts, np.ones(pts.shape[:2]), pts[:, 0])
-    return lines, (coeffs, pts[:, 0].copy(), line_rows[j + 1])
+    arrays = span_arrays(spans)
+    a = evaluate_path(arrays, idx, s_lo)[0]
+    b = evaluate_path(arrays, idx, s_hi)[0]
+    out = _segment_distance(p, a, b)
+    arc = spans.kind[idx] == SpanKind.ARC
+    if arc.any():
+        j = np.flatnonzero(arc)
+        t: ArcTable = spans.arcs
+        it = spans.item[idx[j]]
+        r, h = t.radius[it], t.rise[it]
+        omega = 1.0 / np.sqrt(r * r + h * h)
+        rel = p[j] - t.center[it][:, None]
+        phi = np.arctan2(np.sum(rel * t.e2[it][:, None], axis=2), np.sum(rel * t.e1[it][:, None], axis=2))
+        lo, hi = (s_lo[j] * omega)[:, None], (s_hi[j] * omega)[:, None]
+        mid = (lo + hi) / 2
+        psi = np.clip(mid + np.mod(phi - mid + np.pi, 2 * np.pi) - np.pi, lo, hi)
+        q = evaluate_path(arrays, np.repeat(idx[j], p.shape[1]), (psi / omega[:, None]).ravel())[0]
+        out[j] = np.linalg.norm(p[j] - q.reshape(p[j].shape), axis=2)
+    return out
+
+
+def _blend_coeffs(
+    spans: Spans, i: np.ndarray, ell: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Quintic G2 blends of junctions after spans ``i`` cut back by ``ell``: ``(coeffs, A, Ta, Tb)``."""
+    arrays = span_arrays(spans)
+    qa, ta, ka = evaluate_path(arrays, i, spans.length[i] - ell, 2)
+    qb, tb, kb = evaluate_path(arrays, i + 1, ell, 2)
+    lam = (2.0 * ell)[:, None]
+    p1 = qa + lam / 5 * ta
+    p2 = 2 * p1 - qa + lam**2 / 20 * ka
+    p4 = qb - lam / 5 * tb
+    p3 = 2 * p4 - qb + lam**2 / 20 * kb
+    pts = np.stack([qa, p1, p2, p3, p4, qb], axis=1)
+    return homogeneous_power(pts, np.ones(pts.shape[:2]), qa), qa, ta, tb
+
+
+def _deviation(spans: Spans, i: np.ndarray, ell: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound)."""
+    u = np.broadcast_to(np.linspace(0.0, 1.0, N_DEVIATION), (i.size, N_DEVIATION))
+    p, _, d2 = poly.bezier_derivatives(coeffs, u, 2)  # relative to A
+    p = p + evaluate_path(span_arrays(spans), i, spans.length[i] - ell)[0][:, None]
+    d_in = _piece_distance(p, spans, i, spans.length[i] - ell, spans.length[i])
+    d_out = _piece_distance(p, spans, i + 1, np.zeros_like(ell), ell)
+    # between samples the distance can exceed the sampled one by at most max|P''| h² / 8
+    h = 1.0 / (N_DEVIATION - 1)
+    return np.max(np.minimum(d_in, d_out), axis=1) + np.max(np.linalg.norm(d2, axis=2), axis=1) * h * h / 8
+
+
+def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
+    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring)."""
+    tol = junction_tolerances(program, spans, corner_tol_mm)
+    t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
+    turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
+    j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
+    if j.size == 0:
+        return spans
+    half = 0.5 * spans.length
+    ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
+    lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
+    # line–line: the deviation is (3/8) ℓ sin(θ/2) exactly; elsewhere measure and shrink
+    check = np.flatnonzero(~lines)
+    keep = np.ones(j.size, bool)
+    for _ in range(SHRINK_ROUNDS):
+        if check.size == 0:
+            break
+        coeffs, _, _, _ = _blend_coeffs(spans, j[check], ell[check])
+        dev = _deviation(spans, j[check], ell[check], coeffs)
+        bad = dev > tol[j[check]]
+        ell[check[bad]] *= np.clip(0.95 * tol[j[check[bad]]] / dev[bad], 0.05, 0.95)
+        check = check[bad]
+    keep[check] = False  # still too far after the rounds: an exact corner
+    j, ell = j[keep], ell[keep]
+    keep_len = ell > MIN_LENGTH_MM
+    j, ell = j[keep_len], ell[keep_len]
+    if j.size == 0:
+        return spans
+    coeffs, qa, ta, tb = _blend_coeffs(spans, j, ell)
+    fit = poly.certify_curves(coeffs, qa, np.arange(j.size), speed_tol=poly.BLEND_SPEED_TOL, adaptive=False)
+    owner = fit["owner"]
+    fields_, table = poly_fields(
+        SpanKind.BLEND,
+        fit["coeffs"],
+        fit["origin"],
+        spans.block[j + 1][owner],
+        fit["length"],
+        fit["timing"],
+        exact_extents=False,
+    )
+    # a blend's ends have exactly its neighbours' tangents
+    first = np.concatenate([[True], owner[1:] != owner[:-1]])
+    last = np.concatenate([owner[1:] != owner[:-1], [True]])
+    fields_["tangent_in"][first] = ta[owner[first]]
+    fields_["tangent_out"][last] = tb[owner[last]]
+    fields_["item"] = len(spans.polys) + np.arange(owner.size)
+    trim_start = np.zeros(len(spans))
+    trim_end = np.zeros(len(spans))
+    trim_end[j] = ell
+    trim_start[j + 1] = ell
+    trimmed, arcs = _trim(spans, trim_start, trim_end)
+    alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
+    cols = {k: np.concatenate([trimmed[k][alive], fields_[k]]) for k in trimmed}
+    # a blend's pieces before its second span, in order
+    key = np.concatenate([np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5])
+    return assemble(cols, key, arcs, merge_polys([spans.polys, table]))
+
+
+def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[dict[str, np.ndarray], ArcTable]:
+    """Span fields with lines and arcs cut back at their ends (``trim_start``/``trim_end`` mm), and the arcs."""
+    arrays = span_arrays(spans)
+    idx = np.arange(len(spans))
+    cut = (trim_start > 0) | (trim_end > 0)
+    out = {k: np.array(getattr(spans, k)) for k in SPAN_FIELDS}
+    if not cut.any():
+        return out, spans.arcs
+    c = np.flatnonzero(cut)
+    q0, t0 = evaluate_path(arrays, idx[c], trim_start[c], 1)
+    _, t1 = evaluate_path(arrays, idx[c], spans.length[c] - trim_end[c], 1)
+    out["origin"][c] = q0
+    out["tangent_in"][c] = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
+    out["tangent_out"][c] = t1 / np.linalg.norm(t1, axis=1, keepdims=True)
+    out["length"][c] = spans.length[c] - trim_start[c] - trim_end[c]
+    line = c[spans.kind[c] == SpanKind.LINE]
+    if line.size:
+        end = out["origin"][line] + out["length"][line, None] * out["tangent_in"][line]
+        out["lo"][line] = np.minimum(out["origin"][line], end)
+        out["hi"][line] = np.maximum(out["origin"][line], end)
+    arcs = spans.arcs
+    arc = c[spans.kind[c] == SpanKind.ARC]
+    if arc.size:
+        t = {f: np.array(getattr(arcs, f)) for f in ("center", "e1", "e2", "axis", "radius", "rise", "sweep")}
+        it = spans.item[arc]
+        omega = 1.0 / np.sqrt(t["radius"][it] ** 2 + t["rise"][it] ** 2)
+        psi0 = (trim_start[arc] * omega)[:, None]
+        e1, e2 = t["e1"][it], t["e2"][it]
+        t["e1"][it] = np.cos(psi0) * e1 + np.sin(psi0) * e2
+        t["e2"][it] = -np.sin(psi0) * e1 + np.cos(psi0) * e2
+        t["center"][it] = t["center"][it] + (t["rise"][it] * psi0[:, 0])[:, None] * t["axis"][it]
+        t["sweep"][it] = out["length"][arc] * omega
+        arcs = ArcTable(**t)
+    return out, arcs

@@ -1,80 +1,203 @@
-"""Batched evaluation of rational spans: position and derivatives with respect to ``u``.
+"""Batched evaluation of the path: position and derivatives in the path parameter ``s``.
 
-For ``[N, w](u) = sum_k c_k u^k`` and ``P = origin + N / w`` the quotient rule gives
+One kernel serves every span kind, on NumPy or JAX arrays alike (``xp``), so the tick stage, the
+planner's grid and the build-time checks evaluate the same formulas:
 
-    P'   = (N'   - Q w') / w                                   (Q = N / w)
-    P''  = (N''  - 2 P' w' - Q w'') / w
-    P''' = (N''' - 3 P'' w' - 3 P' w'' - Q w''') / w
+* line: ``q = o + s T`` (``s`` is arc length);
+* arc or helix (centre ``c``, in-plane unit vectors ``e1, e2``, axis ``n``, radius ``r``, rise
+  ``h`` mm per radian): at angle ``ψ = ω s``, ``ω = 1/sqrt(r² + h²)``,
+  ``q = c + r cos ψ e1 + r sin ψ e2 + h ψ n`` — exact, unit speed, ``q' = ω(-r sin ψ e1 + r cos ψ e2 + h n)``,
+  ``q'' = -ω² r (cos ψ e1 + sin ψ e2)``, ``q''' = ω³ r (sin ψ e1 - cos ψ e2)``;
+* polynomial span (NURBS piece, blend): ``q = P(V(s/L))`` with the rational Bézier ``P`` and the
+  timing polynomial ``V`` (:mod:`jaxcnc.geometry.poly`): Horner's scheme on both, the quotient rule
+  for ``P``'s derivatives, then the chain rule
+  ``q' = P' V₁``, ``q'' = P'' V₁² + P' V₂``, ``q''' = P''' V₁³ + 3 P'' V₁ V₂ + P' V₃`` (``V_k = d^k u/ds^k``);
+* point (dwell, event): ``q = o``.
 
-All functions are pure and batched over a leading axis of queries, so they ``vmap``/``jit``
-cleanly and run unchanged on CPU or GPU.
+Arrays are in *column layout* (:func:`span_arrays`): one row per field component, spans along the
+last axis, so a gather by span index reads contiguous vectors (an order of magnitude faster on CPU
+than gathering ``(m, p+1, 4)`` blocks, and it fuses with Horner's loop).
 """
 
 from __future__ import annotations
 
-import jax.numpy as jnp
+from types import ModuleType
 
-import jaxcnc.jaxconfig  # noqa: F401  (float64)
+import numpy as np
+
+from jaxcnc.geometry.kinds import SpanKind
 
 
-def evaluate(coeffs: jnp.ndarray, origin: jnp.ndarray, u: jnp.ndarray, order: int = 0) -> tuple[jnp.ndarray, ...]:
-    """Position and derivatives up to ``order`` (≤ 3) of rational spans at ``u``.
+def span_arrays(spans, xp: ModuleType = np) -> dict:
+    """The fields the evaluation reads, in column layout, as ``xp`` arrays (``numpy`` or ``jax.numpy``)."""
 
-    Args:
-        coeffs: ``(m, degree+1, 4)`` homogeneous power-basis coefficients gathered per query
-            (``spans.coeffs[span_index]``); origin: ``(m, 3)`` (``spans.origin[span_index]``).
-        u: ``(m,)`` parameters in [0, 1].
-    Returns:
-        ``(P, P', ..., P^(order))``, each ``(m, 3)``; ``P`` in mm, derivatives per unit ``u``.
+    def col(a: np.ndarray) -> np.ndarray:
+        return xp.asarray(np.ascontiguousarray(np.moveaxis(np.asarray(a), 0, -1)))
+
+    arcs, polys = spans.arcs, spans.polys
+    return {
+        "kind": xp.asarray(spans.kind),
+        "item": xp.asarray(spans.item),
+        "length": xp.asarray(spans.length),
+        "origin": col(spans.origin),
+        "tangent": col(spans.tangent_in),
+        "arc_center": col(arcs.center),
+        "arc_e1": col(arcs.e1),
+        "arc_e2": col(arcs.e2),
+        "arc_axis": col(arcs.axis),
+        "arc_radius": xp.asarray(arcs.radius),
+        "arc_rise": xp.asarray(arcs.rise),
+        "poly_coeffs": col(polys.coeffs),  # (p+1, 4, q)
+        "poly_timing": col(polys.timing),  # (6, q)
+    }
+
+
+def _horner(c, x, order: int, xp):
+    """Value and derivatives ``[f, f', ...]`` of ``sum_k c[k] x^k`` (``c`` a sequence of arrays)."""
+    deg = len(c) - 1
+    d = [c[deg]] + [xp.zeros_like(x) for _ in range(order)]
+    for k in range(deg - 1, -1, -1):
+        for r in range(min(order, deg - k), 0, -1):
+            d[r] = d[r] * x + d[r - 1]
+        d[0] = d[0] * x + c[k]
+    fact = 1.0
+    for r in range(2, order + 1):
+        fact *= r
+        d[r] = fact * d[r]
+    return d
+
+
+def _rational(c, item, u, order: int, xp) -> list:
+    """Per coordinate: ``[P_i - o_i, P_i', ...]`` of rational Bézier pieces ``item`` at ``u`` (quotient rule).
+
+    ``c``: ``(p+1, 4, n)`` homogeneous power-basis coefficients in column layout.
     """
-    rows = jnp.arange(u.shape[0])
-    return evaluate_spans(jnp.transpose(coeffs, (1, 2, 0)), jnp.transpose(origin), rows, u, order)
+    deg = c.shape[0] - 1
+    h = [_horner([c[k, comp][item] for k in range(deg + 1)], u, order, xp) for comp in range(4)]
+    w = h[3]
+    out = []
+    for i in range(3):
+        n = h[i]
+        p = [n[0] / w[0]]
+        if order >= 1:
+            p.append((n[1] - p[0] * w[1]) / w[0])
+        if order >= 2:
+            p.append((n[2] - 2.0 * p[1] * w[1] - p[0] * w[2]) / w[0])
+        if order >= 3:
+            p.append((n[3] - 3.0 * p[2] * w[1] - 3.0 * p[1] * w[2] - p[0] * w[3]) / w[0])
+        out.append(p)
+    return out
 
 
-def evaluate_spans(
-    coeffs_t: jnp.ndarray, origin_t: jnp.ndarray, seg: jnp.ndarray, u: jnp.ndarray, order: int = 0
-) -> tuple[jnp.ndarray, ...]:
-    """Position and derivatives of span ``seg[i]`` at ``u[i]``, gathering coefficients column by column.
+def _poly(a: dict, span, s, order: int, xp):
+    """Per coordinate ``i``: ``[q_i - o_i, q_i', ...]`` on polynomial spans."""
+    q = a["poly_timing"].shape[-1]
+    item = xp.clip(a["item"][span], 0, q - 1)
+    length = a["length"][span]
+    safe = xp.where(length > 0, length, 1.0)
+    sigma = s / safe
+    t = a["poly_timing"]
+    v = _horner([t[k][item] for k in range(6)], sigma, order, xp)
+    vs = [None] + [v[r] / safe**r for r in range(1, order + 1)]  # d^r u / ds^r
+    out = []
+    for p in _rational(a["poly_coeffs"], item, v[0], order, xp):
+        d = [p[0]]
+        if order >= 1:
+            d.append(p[1] * vs[1])
+        if order >= 2:
+            d.append(p[2] * vs[1] ** 2 + p[1] * vs[2])
+        if order >= 3:
+            d.append(p[3] * vs[1] ** 3 + 3.0 * p[2] * vs[1] * vs[2] + p[1] * vs[3])
+        out.append(d)
+    return out
 
-    Horner's scheme with derivatives: running ``d_r`` (the r-th derivative over r!) are updated
-    from the highest coefficient down, ``d_r ← d_r u + d_(r-1)``, ``d_0 ← d_0 u + c_k``; then the
-    quotient rule of the module docstring.
+
+def _arc(a: dict, span, s, order: int, xp):
+    """Per coordinate ``i``: ``[q_i, q_i', ...]`` on arcs and helices (absolute positions)."""
+    k = a["arc_radius"].shape[-1]
+    item = xp.clip(a["item"][span], 0, k - 1)
+    r, h = a["arc_radius"][item], a["arc_rise"][item]
+    omega = 1.0 / xp.sqrt(r * r + h * h)
+    psi = s * omega
+    cos, sin = xp.cos(psi), xp.sin(psi)
+    out = []
+    for i in range(3):
+        e1, e2, n = a["arc_e1"][i][item], a["arc_e2"][i][item], a["arc_axis"][i][item]
+        d = [a["arc_center"][i][item] + r * (cos * e1 + sin * e2) + h * psi * n]
+        if order >= 1:
+            d.append(omega * (r * (cos * e2 - sin * e1) + h * n))
+        if order >= 2:
+            d.append(-(omega**2) * r * (cos * e1 + sin * e2))
+        if order >= 3:
+            d.append(omega**3 * r * (sin * e1 - cos * e2))
+        out.append(d)
+    return out
+
+
+def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np) -> tuple:
+    """Position and derivatives in ``s`` of span ``span[i]`` at ``s[i]`` mm from its start.
 
     Args:
-        coeffs_t: ``(degree+1, 4, n_spans)`` — the span coefficients transposed so that each
-            gather reads one contiguous vector (on CPU this is an order of magnitude faster than
-            gathering ``(m, degree+1, 4)`` blocks, and it fuses with Horner's loop).
-        origin_t: ``(3, n_spans)``; seg: ``(m,)`` int; u: ``(m,)``.
+        a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm.
+        order: highest derivative (0..3).
     Returns:
-        ``(P, P', ..., P^(order))``, each ``(m, 3)``.
+        ``(q, q', ..., q^(order))``, each ``(m, 3)``: mm, then per mm of path parameter.
     """
     if not 0 <= order <= 3:
         raise ValueError("order must be 0, 1, 2 or 3")
-    deg = coeffs_t.shape[0] - 1
-    comps = []  # per homogeneous component: [H, H', ...]
-    for c in range(4):
-        d = [coeffs_t[deg, c][seg]] + [jnp.zeros_like(u) for _ in range(order)]
-        for k in range(deg - 1, -1, -1):
-            for r in range(min(order, deg - k), 0, -1):
-                d[r] = d[r] * u + d[r - 1]
-            d[0] = d[0] * u + coeffs_t[k, c][seg]
-        fact = 1.0
-        for r in range(2, order + 1):
-            fact *= r
-            d[r] = fact * d[r]
-        comps.append(d)
-    w = comps[3]
-    out = []
+    kind = a["kind"][span]
+    s = xp.clip(s, 0.0, a["length"][span])
+    line = kind == SpanKind.LINE
+    arc = kind == SpanKind.ARC
+    poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
+    polys = _poly(a, span, s, order, xp) if a["poly_timing"].shape[-1] else None
+    arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] else None
+    zero = xp.zeros_like(s)
+    cols = [[] for _ in range(order + 1)]
     for i in range(3):
-        n = comps[i]
-        q = n[0] / w[0]
-        di = [q]
-        if order >= 1:
-            di.append((n[1] - q * w[1]) / w[0])
-        if order >= 2:
-            di.append((n[2] - 2.0 * di[1] * w[1] - q * w[2]) / w[0])
-        if order >= 3:
-            di.append((n[3] - 3.0 * di[2] * w[1] - 3.0 * di[1] * w[2] - q * w[3]) / w[0])
-        di[0] = origin_t[i][seg] + q
-        out.append(di)
-    return tuple(jnp.stack([out[i][r] for i in range(3)], axis=1) for r in range(order + 1))
+        o, t = a["origin"][i][span], a["tangent"][i][span]
+        lin = [o + xp.where(line, s, 0.0) * t, xp.where(line, t, 0.0)] + [zero] * (order - 1)
+        val = lin[: order + 1]
+        if polys is not None:
+            pv = [o + polys[i][0]] + polys[i][1:]
+            val = [xp.where(poly, pv[r], val[r]) for r in range(order + 1)]
+        if arcs is not None:
+            val = [xp.where(arc, arcs[i][r], val[r]) for r in range(order + 1)]
+        for r in range(order + 1):
+            cols[r].append(val[r])
+    return tuple(xp.stack(c, axis=1) for c in cols)
+
+
+def evaluate_bezier(coeffs_t, origin_t, seg, u, order: int = 0, xp: ModuleType = np) -> tuple:
+    """Position and ``u``-derivatives of rational Bézier pieces ``seg[i]`` at ``u[i]`` (no timing).
+
+    Args:
+        coeffs_t: ``(p+1, 4, n)`` homogeneous power-basis coefficients in column layout;
+            origin_t: ``(3, n)``; seg ``(m,)``; u ``(m,)``.
+    Returns:
+        ``(P, P', ..., P^(order))``, each ``(m, 3)``.
+    """
+    cols = [[] for _ in range(order + 1)]
+    for i, p in enumerate(_rational(coeffs_t, seg, u, order, xp)):
+        p[0] = origin_t[i][seg] + p[0]
+        for r in range(order + 1):
+            cols[r].append(p[r])
+    return tuple(xp.stack(c, axis=1) for c in cols)
+
+
+def evaluate(coeffs, origin, u, order: int = 0) -> tuple:
+    """:func:`evaluate_bezier` for pieces in row layout: coeffs ``(m, p+1, 4)``, origin ``(m, 3)``, u ``(m,)``.
+
+    JAX arrays in give JAX arrays out (jittable); NumPy in, NumPy out.
+    """
+    xp = np if all(isinstance(a, np.ndarray | float) for a in (coeffs, origin, u)) else _jnp()
+    rows = xp.arange(u.shape[0])
+    return evaluate_bezier(
+        xp.transpose(xp.asarray(coeffs), (1, 2, 0)), xp.transpose(xp.asarray(origin)), rows, xp.asarray(u), order, xp
+    )
+
+
+def _jnp() -> ModuleType:
+    import jax.numpy as jnp
+
+    return jnp

@@ -1,16 +1,21 @@
-"""The planning grid: spans cut into intervals of arc length, with the path's frame at their ends.
+"""The planning grid: spans cut into intervals of the path parameter, with the path's derivatives at their ends.
 
-Along a fixed path ``q(s)`` (``s`` arc length) every axis moves as ``q̇ = T ṡ`` and
-``q̈ = T s̈ + K ṡ²``, with the unit tangent ``T = dq/ds`` and the curvature vector ``K = d²q/ds²``.
-The phase-plane planner (:mod:`jaxcnc.planners.phaseplane`) needs ``T`` and ``K`` at the ends of
-each interval on which it holds ``s̈`` constant:
+Along the path ``q(s)`` every axis moves as ``q̇ = q' ṡ`` and ``q̈ = q' s̈ + q'' ṡ²``, with ``q'`` and
+``q''`` the derivatives in the path parameter ``s`` (:mod:`jaxcnc.geometry.evaluate`; on lines and
+arcs ``s`` is arc length, ``q'`` the unit tangent and ``q''`` the curvature vector; on polynomial
+spans ``|q'|`` is close to 1). The phase-plane planner (:mod:`jaxcnc.planners.phaseplane`) needs
+``q'`` and ``q''`` at the ends of each interval on which it holds ``s̈`` constant:
 
-* a line has constant ``T`` and ``K = 0``: one interval per line is exact;
-* an arc or B-spline piece is cut into equal intervals, each at most ``TICKS_PER_INTERVAL`` ticks
-  of travel at the span's speed cap and turning at most ``MAX_TURN_RAD``, so that ``T`` and ``K``
-  change little inside one (the planner keeps ``GRID_MARGIN`` of the acceleration for what they
-  do change; the tick table is verified independently);
+* a line has constant ``q'`` and ``q'' = 0``: one interval per line is exact;
+* an arc, NURBS piece or blend is cut into equal intervals turning by at most ``MAX_TURN_RAD``
+  each, so that ``q'`` and ``q''`` change little inside one (the planner keeps ``GRID_MARGIN`` of
+  the acceleration for what they do change and checks interval midpoints; the tick table is
+  verified independently); a blend gets at least ``MIN_BLEND_INTERVALS``, so that a node sits at
+  its curvature peak;
 * a point span (dwell, event) is one interval of zero length.
+
+The grid depends on the geometry alone — not on the feed or the tick rate — so a program plans to
+the same motion at any tick rate.
 """
 
 from __future__ import annotations
@@ -22,16 +27,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.evaluate import evaluate_spans
-from jaxcnc.geometry.inverse import span_arrays, u_of_s
-from jaxcnc.geometry.spans import SpanKind, Spans, pad_spans
-from jaxcnc.planners.trapezoid import bucket_size
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
+from jaxcnc.geometry.spans import Spans, pad_spans
+from jaxcnc.planners.buckets import bucket_size
 
-TICKS_PER_INTERVAL = 4.0
 MAX_TURN_RAD = 0.0175  # 1°
-#: The tick rule does not cut intervals shorter than this (slow feeds need no finer time resolution).
-MIN_INTERVAL_MM = 0.02
-#: Fraction of the acceleration kept back on curved intervals for the change of T and K inside one.
+#: Intervals of a blend before refinement (the middle node sits on its curvature peak).
+MIN_BLEND_INTERVALS = 2
+#: Fraction of the acceleration kept back on curved intervals for the change of q' and q'' inside one.
 GRID_MARGIN = 2e-3
 MAX_INTERVALS_PER_SPAN = 1 << 16
 
@@ -42,11 +46,11 @@ class Grid:
 
     Attributes:
         span: ``(m,)`` the span each interval lies on.
-        s_start: ``(m,)`` mm from the span's start to the interval's start.
-        delta: ``(m,)`` mm, the interval's length (0 for point spans).
-        t_a, k_a: ``(m, 3)`` unit tangent and curvature vector (1/mm) at the interval's start.
+        s_start: ``(m,)`` path parameter from the span's start to the interval's start (mm).
+        delta: ``(m,)`` mm, the interval's length in the path parameter (0 for point spans).
+        t_a, k_a: ``(m, 3)`` ``q'`` and ``q''`` (1/mm) at the interval's start.
         t_b, k_b: ``(m, 3)`` the same at its end.
-        curved: ``(m,)`` bool, the interval lies on an arc or B-spline piece.
+        curved: ``(m,)`` bool, the interval lies on an arc, NURBS piece or blend.
     """
 
     span: np.ndarray
@@ -63,41 +67,29 @@ class Grid:
 
 
 def is_curved(kind: np.ndarray) -> np.ndarray:
-    """``(n,)`` bool: the span kind has curvature (arc or B-spline piece)."""
-    return (kind == SpanKind.ARC) | (kind == SpanKind.CURVE)
+    """``(n,)`` bool: the span kind has curvature (arc, NURBS piece or blend)."""
+    return np.isin(kind, CURVED_KINDS)
 
 
-def interval_counts(spans: Spans, v_cap_mm_s: np.ndarray, tick_hz: float) -> np.ndarray:
-    """``(n,)`` number of grid intervals of each span (1 for lines and points).
-
-    Args:
-        v_cap_mm_s: ``(n,)`` an upper bound of the speed on each span (feed and axis limits).
-    """
-    ticks_mm = np.maximum(v_cap_mm_s, 1e-9) * TICKS_PER_INTERVAL / tick_hz
-    turn_mm = np.where(spans.kappa_max > 0, MAX_TURN_RAD / np.maximum(spans.kappa_max, 1e-300), np.inf)
-    h = np.minimum(np.maximum(ticks_mm, MIN_INTERVAL_MM), turn_mm)
-    n = np.ceil(spans.length / h)
+def interval_counts(spans: Spans) -> np.ndarray:
+    """``(n,)`` number of grid intervals of each span (1 for lines and points), from its turning."""
+    turning = spans.length * spans.kappa_max
+    n = np.ceil(turning / MAX_TURN_RAD)
+    n = np.where(spans.kind == SpanKind.BLEND, np.maximum(n, MIN_BLEND_INTERVALS), n)
     n = np.where(is_curved(spans.kind), np.clip(n, 1, MAX_INTERVALS_PER_SPAN), 1)
     return n.astype(np.int64)
 
 
 @jax.jit
-def path_frame(spans: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Unit tangent ``T`` and curvature vector ``K = d²q/ds²`` ``(m, 3)`` at ``s`` mm along ``span`` ``(m,)``.
-
-    From the span derivatives in ``u``: ``T = P'/|P'|`` and ``K = (P'' - T (T·P''))/|P'|²``.
-    """
-    u = u_of_s(spans, span, s, newton_steps=1)
-    _, d1, d2 = evaluate_spans(spans["coeffs_t"], spans["origin_t"], span, u, 2)
-    speed = jnp.linalg.norm(d1, axis=1, keepdims=True)
-    t = d1 / jnp.where(speed > 0, speed, 1.0)
-    k = (d2 - t * jnp.sum(t * d2, axis=1, keepdims=True)) / jnp.where(speed > 0, speed, 1.0) ** 2
-    return t, k
+def path_frame(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """``q'`` and ``q''`` ``(m, 3)`` at ``s`` along span ``span`` ``(m,)``."""
+    _, d1, d2 = evaluate_path(arrays, span, s, 2, xp=jnp)
+    return d1, d2
 
 
 def device_spans(spans: Spans) -> dict[str, jnp.ndarray]:
     """The span arrays :func:`frames_at` reads, padded to a bucket (upload once, query often)."""
-    return span_arrays(pad_spans(spans, bucket_size(len(spans))))
+    return span_arrays(pad_spans(spans, bucket_size(len(spans))), xp=jnp)
 
 
 def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -13,12 +13,14 @@ difference by ``a_max``. Spans between exact stops or exactly tangent junctions 
 Lines. With unit direction ``e``, axis ``i`` moves at ``v·e_i`` and accelerates at ``a_t·e_i``:
 ``v ≤ min_i v_max_i / |e_i|`` and ``a_t ≤ min_i a_i / |e_i|`` (``a_i`` the smooth budget).
 
-Curved spans (arcs, B-spline pieces; maximum curvature κ). The acceleration is
-``a_t T + v² κ(u) N`` with ``T ⊥ N`` unit vectors, so every axis component obeys
-``|a_i| ≤ sqrt(a_t² + (v² κ)²)`` and ``|v_i| ≤ v``. The speed is capped so that the centripetal
-part uses at most ``ARC_NORMAL_SHARE`` of ``A`` (the smallest acceleration among the axes the
-span moves): ``v² ≤ ARC_NORMAL_SHARE · A / κ``; the tangential budget is what remains at the cap
-speed, ``a_t = sqrt(A² - (v_cap² κ)²)``.
+Curved spans. On an arc (unit speed, curvature κ) the acceleration is ``a_t T + v² κ N`` with
+``T ⊥ N`` unit vectors, so every axis component obeys ``|a_i| ≤ sqrt(a_t² + (v² κ)²)`` and
+``|v_i| ≤ v``. The speed is capped so that the centripetal part uses at most ``ARC_NORMAL_SHARE``
+of ``A`` (the smallest acceleration among the axes the span moves): ``v² ≤ ARC_NORMAL_SHARE · A / κ``;
+the tangential budget is what remains at the cap speed, ``a_t = sqrt(A² - (v_cap² κ)²)``. On a
+polynomial span (NURBS piece, blend) the path parameter's speed ``|q'| ≤ d1`` and ``|q''| ≤ d2``
+need not be 1 and orthogonal: ``|q̈_i| ≤ d1 |s̈| + d2 ṡ²`` bounds every axis, with the same share
+for the ``ṡ²`` part and ``a_t = (A - d2 x_cap) / d1``.
 
 Chord error. Drives interpolate linearly between ticks; a chord subtending ``Δθ`` on radius
 ``1/κ`` has sagitta ``(1 - cos(Δθ/2)) / κ``, so ``chord_tol`` allows ``Δθ = 2 acos(1 - tol κ)`` per
@@ -34,7 +36,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.geometry.kinds import SpanKind
 
 JUNCTION_SHARE = 0.05
 #: Relative margin below every limit, so that values measured on the table — whose positions
@@ -50,6 +52,8 @@ def span_caps(
     kind: jnp.ndarray,
     length: jnp.ndarray,
     kappa: jnp.ndarray,
+    d1: jnp.ndarray,
+    d2: jnp.ndarray,
     tangent: jnp.ndarray,
     moving: jnp.ndarray,
     feed_mm_s: jnp.ndarray,
@@ -62,7 +66,8 @@ def span_caps(
     """Speed cap (as v², mm²/s²) and tangential acceleration cap (mm/s²) of each span.
 
     Args:
-        kind, length: ``(n,)`` span arrays; kappa: ``(n,)`` maximum curvature (1/mm).
+        kind, length: ``(n,)`` span arrays; kappa: ``(n,)`` maximum curvature (1/mm); d1, d2:
+            ``(n,)`` maxima of ``|q'|`` and ``|q''|`` in the path parameter.
         tangent: ``(n, 3)`` unit tangent of lines (any unit vector for curved spans).
         moving: ``(n, 3)`` bool, the axis moves within the span.
         feed_mm_s: ``(n,)`` programmed speed (feed or rapid cap) of each span.
@@ -77,20 +82,23 @@ def span_caps(
     v_line = jnp.min(v_max[None, :] * inv, axis=1)
     a_line = jnp.min(a_smooth * inv, axis=1)
 
-    # Curved spans (arcs, B-spline pieces): |a_i| <= sqrt(a_t² + (v² κ)²) on every axis, |v_i| <= v.
-    curved = (kind == SpanKind.ARC) | (kind == SpanKind.CURVE)
+    # Curved spans: |a_i| <= sqrt(a_t² + (v² κ)²) on arcs, <= d1 a_t + d2 ṡ² on polynomial spans.
+    arc = kind == SpanKind.ARC
+    curved = arc | (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
     a_curve = jnp.min(jnp.where(moving, a_smooth, jnp.inf), axis=1)
     v_curve = jnp.min(jnp.where(moving, v_max[None, :], jnp.inf), axis=1)
-    bent = kappa > 0
-    k_safe = jnp.where(bent, kappa, 1.0)
-    x_centripetal = jnp.where(bent, ARC_NORMAL_SHARE * a_curve / k_safe, jnp.inf)
+    bent = d2 > 0
+    d2_safe = jnp.where(bent, d2, 1.0)
+    d1_safe = jnp.where(d1 > 0, d1, 1.0)
+    x_centripetal = jnp.where(bent, ARC_NORMAL_SHARE * a_curve / d2_safe, jnp.inf)
     v_chord = chord_speed(kappa, chord_tol_mm, tick_hz)
-    x_curve = jnp.minimum(jnp.minimum(v_curve, v_chord) ** 2, x_centripetal)
+    x_curve = jnp.minimum((jnp.minimum(v_curve, jnp.minimum(v_chord, feed_mm_s)) / d1_safe) ** 2, x_centripetal)
 
-    x_axis = jnp.where(curved, x_curve, v_line**2)
-    x_cap = jnp.minimum(x_axis, feed_mm_s**2)
-    a_n = x_cap * jnp.where(bent, kappa, 0.0)
-    a_t = jnp.where(curved, jnp.sqrt(jnp.maximum(a_curve**2 - a_n**2, 0.0)), a_line)
+    x_cap = jnp.where(curved, x_curve, jnp.minimum(v_line, feed_mm_s) ** 2)
+    a_n = x_cap * jnp.where(bent, d2, 0.0)
+    a_arc = jnp.sqrt(jnp.maximum(a_curve**2 - a_n**2, 0.0))
+    a_poly = jnp.maximum(a_curve - a_n, 0.0) / d1_safe
+    a_t = jnp.where(curved, jnp.where(arc, a_arc, a_poly), a_line)
     is_point = kind == SpanKind.POINT
     return jnp.where(is_point, 0.0, x_cap), jnp.where(is_point, jnp.inf, a_t)
 

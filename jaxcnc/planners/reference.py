@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.planners.grid import Grid, build_grid
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions
 from jaxcnc.planners.registry import PlanRequest
@@ -80,11 +80,12 @@ def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
 
 
 def node_caps(p: RefProblem) -> np.ndarray:
-    """``(m+1,)`` cap on ``x`` at the nodes from the axis speeds and the feed."""
+    """``(m+1,)`` cap on ``x = ṡ²`` at the nodes from the axis speeds and the feed (the tool moves at ``|q'| ṡ``)."""
     comp = np.abs(p.t)
     with np.errstate(divide="ignore"):
         x_axis = np.min(np.where(comp > 0, (p.v_max / comp) ** 2, np.inf), axis=1)
-    return np.minimum(x_axis, p.feed**2)
+        x_feed = (p.feed / np.linalg.norm(p.t, axis=1)) ** 2
+    return np.minimum(x_axis, x_feed)
 
 
 def plan_from_nodes(p: RefProblem, x_node: np.ndarray, req: PlanRequest) -> Plan:

@@ -40,11 +40,11 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.errors import PlanningError
-from jaxcnc.geometry.evaluate import evaluate_spans
-from jaxcnc.geometry.inverse import span_arrays, u_of_s
-from jaxcnc.geometry.spans import SpanKind, pad_spans
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.geometry.spans import pad_spans
+from jaxcnc.planners.buckets import bucket_size
 from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
-from jaxcnc.planners.trapezoid import bucket_size
 
 CHUNK = 1 << 16
 log = logging.getLogger(__name__)
@@ -247,14 +247,14 @@ def span_starts(spans) -> tuple[dict, jnp.ndarray]:
     padded = pad_spans(spans, bucket_size(n))
     span_s0 = padded.s0
     span_s0[n:] = np.inf
-    return span_arrays(padded), jnp.asarray(span_s0)
+    return span_arrays(padded, xp=jnp), jnp.asarray(span_s0)
 
 
 @jax.jit
 def positions_at_s(spans: dict, span_s0: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Program-axis positions ``(m, 3)`` at path lengths ``s`` ``(m,)`` from the program start, and their span."""
     span = jnp.clip(jnp.searchsorted(span_s0, s, side="right") - 1, 0, span_s0.shape[0] - 1)
-    (p,) = evaluate_spans(spans["coeffs_t"], spans["origin_t"], span, u_of_s(spans, span, s - span_s0[span]))
+    (p,) = evaluate_path(spans, span, s - span_s0[span], xp=jnp)
     return p, span
 
 

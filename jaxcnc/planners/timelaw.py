@@ -215,7 +215,7 @@ def v_at(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick
     ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
     v_acc = plan["v0"][seg] + plan["a_acc"][seg] * jnp.minimum(tau, ta)
     v_dec = plan["vp"][seg] - plan["a_dec"][seg] * jnp.clip(tau - ta - tc, 0.0, td)
-    return jnp.where(tau < ta, v_acc, v_dec)
+    return jnp.maximum(jnp.where(tau < ta, v_acc, v_dec), 0.0)  # (rounding may leave -1e-14 at a rest)
 
 
 def sample_plan(plan: Plan, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -28,13 +28,13 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.errors import PlanningError
-from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.planners.buckets import bucket_size, pad_rows
 from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
 from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, junctions
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
-from jaxcnc.planners.trapezoid import MOVING_MM, bucket_size, pad_rows
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -48,11 +48,17 @@ JERK_SHARE = 0.5
 
 
 def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndarray, chord_tol_mm, tick_hz):
-    """``(m,)`` cap on ``x = v²`` at nodes with frame ``t``, ``k`` ``(m, 3)``: axis speeds, feed, chord error."""
+    """``(m,)`` cap on ``x = ṡ²`` at nodes with ``q' = t``, ``q'' = k`` ``(m, 3)``: axis speeds, feed, chord error.
+
+    The tool moves at ``|q'| ṡ``, axis ``i`` at ``|q'_i| ṡ``; the curvature is ``|q' × q''| / |q'|³``.
+    """
     comp = jnp.abs(t)
     x_axis = jnp.min(jnp.where(comp > 0, (v_max / jnp.where(comp > 0, comp, 1.0)) ** 2, jnp.inf), axis=1)
-    v_chord = chord_speed(jnp.linalg.norm(k, axis=1), chord_tol_mm, tick_hz)
-    return jnp.minimum(jnp.minimum(x_axis, feed**2), v_chord**2)
+    speed = jnp.linalg.norm(t, axis=1)
+    safe = jnp.where(speed > 0, speed, 1.0)
+    kappa = jnp.linalg.norm(jnp.cross(t, k), axis=1) / safe**3
+    v_tool = jnp.minimum(feed, chord_speed(kappa, chord_tol_mm, tick_hz))  # the tool's own speed caps
+    return jnp.minimum(x_axis, jnp.where(speed > 0, (v_tool / safe) ** 2, jnp.inf))
 
 
 def jerk_cap(k_a: jnp.ndarray, k_b: jnp.ndarray, delta: jnp.ndarray, j_max: jnp.ndarray) -> jnp.ndarray:
@@ -113,14 +119,6 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
     return out
 
 
-def initial_counts(req: PlanRequest) -> np.ndarray:
-    """``(n,)`` grid intervals per span before refinement (curved spans by turning angle)."""
-    spans = req.spans
-    moving = spans.hi - spans.lo > MOVING_MM
-    v_axes = np.min(np.where(moving, req.v_max[None, :], np.inf), axis=1)
-    return interval_counts(spans, np.minimum(req.feed_mm_s, v_axes), req.machine.tick_hz)
-
-
 def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """``(m,)`` bool: on a curved interval the planned acceleration may exceed the budget inside.
 
@@ -152,7 +150,7 @@ def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarra
 def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
     spans = req.spans
-    counts = hold_counts(req, initial_counts(req))
+    counts = hold_counts(req, interval_counts(spans))
     arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all rounds
     for _ in range(MAX_REFINE):
         grid = build_grid(spans, counts, arrays)

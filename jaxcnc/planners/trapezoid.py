@@ -13,25 +13,34 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.planners.buckets import bucket_size, pad_rows
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
 
-MIN_BUCKET = 256
 #: An axis whose extent within a span is below this (mm) does not move there.
 MOVING_MM = 1e-12
 
 
-def bucket_size(n: int) -> int:
-    """The padded length for ``n`` items: the next power of two, at least ``MIN_BUCKET``."""
-    return max(MIN_BUCKET, 1 << max(0, int(n - 1).bit_length()))
-
-
 @jax.jit
 def plan_arrays(
-    kind, length, kappa, moving, tangent_in, tangent_out, feed, dwell, stop_before, v_max, a_max, chord_tol, tick_hz
+    kind,
+    length,
+    kappa,
+    d1,
+    d2,
+    moving,
+    tangent_in,
+    tangent_out,
+    feed,
+    dwell,
+    stop_before,
+    v_max,
+    a_max,
+    chord_tol,
+    tick_hz,
 ):
     """The planner as one array program; all span arrays ``(n,)`` or ``(n, 3)``.
 
@@ -39,7 +48,9 @@ def plan_arrays(
     the ``n+1`` nodes).
     """
     at_kink, j_cap = junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
-    x_cap, a_t = span_caps(kind, length, kappa, tangent_in, moving, feed, v_max, a_max, chord_tol, tick_hz, at_kink)
+    x_cap, a_t = span_caps(
+        kind, length, kappa, d1, d2, tangent_in, moving, feed, v_max, a_max, chord_tol, tick_hz, at_kink
+    )
     j_cap = jnp.minimum(j_cap, jnp.minimum(x_cap[:-1], x_cap[1:]))
     zero = jnp.zeros((1,), jnp.float64)
     node_cap = jnp.concatenate([zero, j_cap, zero])
@@ -49,12 +60,6 @@ def plan_arrays(
     out = align_to_ticks(prof, x_node[:-1] == 0.0, tick_hz)
     out["x_node"] = x_node
     return out
-
-
-def pad_rows(a: np.ndarray, n: int, fill) -> np.ndarray:
-    """``a`` followed by rows of ``fill`` up to ``n`` rows (static shapes for compiled kernels)."""
-    pad = [(0, n - a.shape[0])] + [(0, 0)] * (a.ndim - 1)
-    return np.pad(a, pad, constant_values=fill)
 
 
 @register_planner("lookahead")
@@ -67,6 +72,8 @@ def plan_lookahead(req: PlanRequest) -> Plan:
         pad_rows(spans.kind, m, SpanKind.POINT),
         pad_rows(spans.length, m, 0.0),
         pad_rows(spans.kappa_max, m, 0.0),
+        pad_rows(spans.d1_max, m, 0.0),
+        pad_rows(spans.d2_max, m, 0.0),
         pad_rows(spans.hi - spans.lo > MOVING_MM, m, False),
         pad_rows(spans.tangent_in, m, 0.0),
         pad_rows(spans.tangent_out, m, 0.0),

@@ -18,9 +18,9 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind
+from jaxcnc.planners.buckets import bucket_size
 from jaxcnc.planners.pulsed import PlannedPoints
 from jaxcnc.planners.pulsed.trajectory import Trajectory
-from jaxcnc.planners.trapezoid import bucket_size
 from jaxcnc.program import PROGRAM_AXES
 from jaxcnc.ticks.sample import CHUNK_TICKS, machine_axes
 from jaxcnc.ticks.table import table_meta, write_samples

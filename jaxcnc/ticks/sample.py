@@ -1,9 +1,9 @@
 """Sampling the time law at the tick rate: tick → s → u → position, batched on the device.
 
-For tick ``k`` the segment comes from a search over segment first ticks, the path length from
-the segment's trapezoid, the span parameter from the closed-form ``u(s)``, the position from
-the rational span. Ticks are processed in fixed-size chunks (one compiled program for any job);
-positions are quantised from the exact position each tick — rounding never accumulates.
+For tick ``k`` the segment comes from a search over segment first ticks, the path parameter from
+the segment's trapezoid, the position from the span's closed form (:mod:`jaxcnc.geometry.evaluate`).
+Ticks are processed in fixed-size chunks (one compiled program for any job); positions are
+quantised from the exact position each tick — rounding never accumulates.
 """
 
 from __future__ import annotations
@@ -17,46 +17,28 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.geometry.evaluate import evaluate_spans
-from jaxcnc.geometry.inverse import span_arrays, u_of_s
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.hw.tablefile import FINE_SCALE
+from jaxcnc.planners.buckets import bucket_size
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.smoothing import SmoothPlan, positions_at_s, span_starts
 from jaxcnc.planners.timelaw import PLAN_KEYS, s_at, segment_of_tick
-from jaxcnc.planners.trapezoid import bucket_size
 
 CHUNK_TICKS = 1 << 16
 
 
 @partial(jax.jit, static_argnames=("chunk",))
-def _params_chunk(
-    first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
-) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Span and span parameter ``u`` ``(chunk,)`` of ticks ``first + i``: tick → segment → s → u."""
-    tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
-    seg = segment_of_tick(plan["first_tick"], tick)
-    s = plan["s_start"][seg] + s_at(plan, plan["length"], seg, tick, tick_hz)
-    span = plan["span"][seg]
-    return span, u_of_s(spans, span, s)
-
-
-@jax.jit
-def _positions(spans: dict, seg: jnp.ndarray, u: jnp.ndarray) -> jnp.ndarray:
-    (p,) = evaluate_spans(spans["coeffs_t"], spans["origin_t"], seg, u)
-    return p
-
-
 def _positions_chunk(
     first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Exact program-axis positions ``(chunk, 3)`` and their span, for ticks ``first + i``.
-
-    Two compiled programs, not one: fused together, XLA's CPU backend recomputes the time law
-    and ``u(s)`` inside every use Horner's scheme makes of ``u`` (measured 4x slower).
-    """
-    seg, u = _params_chunk(first, n_last, plan, spans, tick_hz, chunk)
-    return _positions(spans, seg, u), seg
+    """Exact program-axis positions ``(chunk, 3)`` and their segment, for ticks ``first + i``:
+    tick → segment → s → position."""
+    tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
+    seg = segment_of_tick(plan["first_tick"], tick)
+    s = plan["s_start"][seg] + s_at(plan, plan["length"], seg, tick, tick_hz)
+    (p,) = evaluate_path(spans, plan["span"][seg], s, xp=jnp)
+    return p, seg
 
 
 @jax.jit
@@ -106,7 +88,7 @@ class TickSampler:
 
         keys = PLAN_KEYS + ("length", "span", "s_start")
         self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in keys}
-        self._spans = span_arrays(pad_spans(spans, bucket_size(len(spans))))
+        self._spans = span_arrays(pad_spans(spans, bucket_size(len(spans))), xp=jnp)
 
     @property
     def n_rows(self) -> int:

@@ -13,7 +13,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 import jaxcnc
-from jaxcnc.geometry.spans import SpanKind
+from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter, file_sha256
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob

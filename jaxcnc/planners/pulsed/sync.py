@@ -29,11 +29,11 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.errors import PlanningError, SourceError
+from jaxcnc.planners.buckets import bucket_size
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.spline import cubic_coefficients, interval_extremes, spline_moments
 from jaxcnc.planners.pulsed.trajectory import Trajectory
 from jaxcnc.planners.pulsed.windows import snap_up_ticks
-from jaxcnc.planners.trapezoid import bucket_size
 
 #: Stretch a little beyond the measured factor so the loop does not creep up one tick at a time.
 OVERSHOOT = 1.002

@@ -1,6 +1,6 @@
 """Planner benchmark: jaxcnc's ``topp`` beside the time-optimal references on the butterfly.
 
-``jaxcnc bench planners`` (or ``python benchmarks/bench_optimal_curve.py``). The curve is the
+``jaxcnc bench planners`` (or ``python benchmarks/bench_planners.py``). The curve is the
 corpus butterfly (``../shared/corpus``) or, without it, a built-in cubic NURBS; the machine is the
 issue's: x and y at v = 100 mm/s and a = 1000 mm/s², feed 100 mm/s, chord 1 µm, 10 kHz. Every
 plan is written as a tick table and measured by the independent verifier, so "violation factor"
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxcnc.bench import _find_butterfly, random_cubic_nurbs
+from jaxcnc.bench.programs import find_butterfly, random_cubic_nurbs
 from jaxcnc.hw.tablefile import TableFile
 from jaxcnc.io.curves import curves_program
 from jaxcnc.machine import MachineConfig, parse_machine
@@ -47,7 +47,7 @@ chord_tol_mm = 0.001
 
 def butterfly_program(feed: float):
     """The corpus butterfly (or a stand-in cubic NURBS) as a program at ``feed``; and its name."""
-    curve = _find_butterfly()
+    curve = find_butterfly()
     name = "butterfly (corpus)"
     if curve is None:
         curve, name = random_cubic_nurbs(60), "cubic NURBS, 60 points (corpus absent)"

@@ -74,7 +74,7 @@ def _plan_wall_cold(n_points: int) -> float:
     """Seconds to plan program 4 with ``sync`` in a fresh process without the compile cache."""
     code = (
         "import time, numpy as np\n"
-        "from jaxcnc.bench_pulsed import glass_engraver, program_points\n"
+        "from jaxcnc.bench.pulsed import glass_engraver, program_points\n"
         "from jaxcnc.io.points import PointJob\n"
         f"pts = program_points(4, {n_points})\n"
         "job = PointJob(pts, None, np.arange(1, len(pts) + 1), 'program-4')\n"

@@ -1,0 +1,83 @@
+"""Synthetic programs and machines the benchmarks plan (and where the corpus lies)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from jaxcnc.program import Kind, Program, program_from_columns
+
+BENCH_MACHINE = """\
+[machine]
+name = "bench"
+tick_hz = 10000
+[axes.x]
+v_max = 250.0
+a_max = 3000.0
+min = -1000.0
+max = 1000.0
+[axes.y]
+v_max = 250.0
+a_max = 3000.0
+min = -1000.0
+max = 1000.0
+[path]
+feed = 100.0
+rapid = 250.0
+"""
+
+
+def synthetic_program(n_blocks: int, seed: int = 0) -> Program:
+    """A smooth curve cut into ``n_blocks`` lines of 50–150 µm (CAM output of a spline).
+
+    The curvature oscillates between -0.01 and 0.06 /mm around a positive mean, so the curve
+    winds around and stays within about 200 mm; headings change by at most 0.6° per block, so
+    junctions are passed moving and only curvature and block length limit the speed.
+    """
+    rng = np.random.default_rng(seed)
+    step = rng.uniform(0.05, 0.15, n_blocks)
+    s = np.cumsum(step)
+    curvature = 1 / 40 + 0.035 * np.sin(s / 5.0)
+    heading = np.cumsum(step * curvature)
+    pts = np.zeros((n_blocks + 1, 3))
+    pts[1:, 0] = np.cumsum(step * np.cos(heading))
+    pts[1:, 1] = np.cumsum(step * np.sin(heading))
+    pts[:, :2] -= pts[:, :2].mean(axis=0)
+    return program_from_columns(
+        file="<synthetic>",
+        kind=np.full(n_blocks, Kind.LINE),
+        start=pts[:-1],
+        end=pts[1:],
+        feed=np.full(n_blocks, 100.0),
+        line=np.arange(1, n_blocks + 1),
+    )
+
+
+def random_cubic_nurbs(n_points: int = 1000, seed: int = 0) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """A planar cubic NURBS with ``n_points`` control points winding through a 200 mm field."""
+    rng = np.random.default_rng(seed)
+    ang = np.cumsum(rng.normal(0.0, 0.25, n_points))
+    pts = np.cumsum(np.stack([np.cos(ang), np.sin(ang)], axis=1) * rng.uniform(1.0, 3.0, (n_points, 1)), axis=0)
+    pts = np.c_[pts - pts.mean(axis=0), np.zeros(n_points)]
+    w = rng.uniform(0.5, 2.0, n_points)
+    knots = np.concatenate([np.zeros(4), np.linspace(0, 1, n_points - 2)[1:-1], np.ones(4)])
+    return 3, pts, w, knots
+
+
+def shared_dir() -> Path | None:
+    """The workplace's ``shared`` folder (corpus, peers) beside this checkout or the current directory, if any."""
+    here = Path(__file__).resolve()
+    for base in (Path.cwd(), Path.cwd().parent, here.parents[2], here.parents[3]):
+        if (base / "shared").is_dir():
+            return base / "shared"
+    return None
+
+
+def find_butterfly() -> tuple | None:
+    """The corpus butterfly NURBS, or ``None`` when the corpus is absent."""
+    from jaxcnc.io.curves import read_curves_json
+
+    shared = shared_dir()
+    f = shared / "corpus" / "nurbs" / "butterfly_deg3_iges.json" if shared else None
+    return read_curves_json(f)[0] if f is not None and f.is_file() else None
