@@ -81,3 +81,45 @@ def find_butterfly() -> tuple | None:
     shared = shared_dir()
     f = shared / "corpus" / "nurbs" / "butterfly_deg3_iges.json" if shared else None
     return read_curves_json(f)[0] if f is not None and f.is_file() else None
+
+
+def cam_polyline(n_blocks: int, seed: int = 0, arc_every: int = 50) -> Program:
+    """A CAM-style contour of ``n_blocks`` moves: lines of 50–150 µm turning 0.1–5° at every junction,
+    with a tangent-free circular arc (radius 1–5 mm, 10–90°) every ``arc_every`` blocks.
+
+    The turn's sign follows a slow sine so that the contour winds around and stays within a few
+    hundred mm, as a spline cut into chords by a post processor would.
+    """
+    rng = np.random.default_rng(seed)
+    k = np.arange(n_blocks)
+    is_arc = (k % arc_every == arc_every - 1) if arc_every else np.zeros(n_blocks, bool)
+    turn = np.radians(rng.uniform(0.1, 5.0, n_blocks)) * np.where(np.sin(k / 97.0) + 0.3 > 0, 1.0, -1.0)
+    step = rng.uniform(0.05, 0.15, n_blocks)
+    radius = rng.uniform(1.0, 5.0, n_blocks)
+    sweep = np.radians(rng.uniform(10.0, 90.0, n_blocks)) * np.sign(turn)
+    heading = np.cumsum(turn + np.where(is_arc, sweep, 0.0))  # direction after each block
+    h_in = heading - np.where(is_arc, sweep, 0.0)  # direction at each block's start
+    # a line moves `step` along its heading; an arc of sweep φ on radius r moves the chord 2 r sin(φ/2)
+    # along the mean of its start and end directions
+    chord = np.where(is_arc, 2 * radius * np.abs(np.sin(sweep / 2)), step)
+    mid = np.where(is_arc, h_in + sweep / 2, heading)
+    pts = np.zeros((n_blocks + 1, 3))
+    pts[1:, 0] = np.cumsum(chord * np.cos(mid))
+    pts[1:, 1] = np.cumsum(chord * np.sin(mid))
+    pts[:, :2] -= pts[:, :2].mean(axis=0)
+    # arc centres: on the left of the start direction (counter-clockwise) or the right
+    left = np.stack([-np.sin(h_in), np.cos(h_in)], axis=1) * np.sign(sweep)[:, None]
+    center = np.full((n_blocks, 3), np.nan)
+    center[:, :2] = pts[:-1, :2] + radius[:, None] * left
+    center[:, 2] = 0.0
+    return program_from_columns(
+        file="<cam-polyline>",
+        kind=np.where(is_arc, Kind.ARC, Kind.LINE),
+        start=pts[:-1],
+        end=pts[1:],
+        center=np.where(is_arc[:, None], center, np.nan),
+        turn=np.where(is_arc, np.sign(sweep), 0).astype(np.int8),
+        feed=np.full(n_blocks, 100.0),
+        blend_tol=np.full(n_blocks, np.inf),
+        line=k + 1,
+    )

@@ -49,9 +49,13 @@ BLEND_DEGREE = 5
 MIN_TURN_RAD = 1e-9
 MAX_TURN_RAD = np.deg2rad(150.0)
 #: Points of a blend where its distance to the replaced path is measured.
-N_DEVIATION = 33
+N_DEVIATION = 17
+#: Points of a blend where its path parameter and maxima are checked (it is short and smooth).
+BLEND_CHECK = 9
 #: Rounds of shrinking a blend whose measured deviation exceeds the tolerance.
 SHRINK_ROUNDS = 8
+#: Rounds of giving up a chain curvature where a blend would leave the tolerance.
+CHAIN_ROUNDS = 4
 
 
 def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) -> np.ndarray:
@@ -110,12 +114,18 @@ def _piece_distance(p: np.ndarray, spans: Spans, idx: np.ndarray, s_lo: np.ndarr
 
 
 def _blend_coeffs(
-    spans: Spans, i: np.ndarray, ell: np.ndarray
+    spans: Spans, i: np.ndarray, ell: np.ndarray, k_mid: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Quintic G2 blends of junctions after spans ``i`` cut back by ``ell``: ``(coeffs, A, Ta, Tb)``."""
+    """Quintic G2 blends of junctions after spans ``i`` cut back by ``ell``: ``(coeffs, A, Ta, Tb)``.
+
+    ``k_mid``: ``(n, 3)`` curvature vectors at the middles of consumed lines (:func:`_chain_curvature`),
+    used where a blend starts or ends there.
+    """
     arrays = span_arrays(spans)
     qa, ta, ka = evaluate_path(arrays, i, spans.length[i] - ell, 2)
     qb, tb, kb = evaluate_path(arrays, i + 1, ell, 2)
+    if k_mid is not None:
+        ka, kb = ka + k_mid[i], kb + k_mid[i + 1]  # a line's own curvature is 0
     lam = (2.0 * ell)[:, None]
     p1 = qa + lam / 5 * ta
     p2 = 2 * p1 - qa + lam**2 / 20 * ka
@@ -135,6 +145,36 @@ def _deviation(spans: Spans, i: np.ndarray, ell: np.ndarray, coeffs: np.ndarray)
     # between samples the distance can exceed the sampled one by at most max|P''| h² / 8
     h = 1.0 / (N_DEVIATION - 1)
     return np.max(np.minimum(d_in, d_out), axis=1) + np.max(np.linalg.norm(d2, axis=2), axis=1) * h * h / 8
+
+
+def _chain_curvature(spans: Spans, j: np.ndarray, ell: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` curvature vectors at the middles of lines the blends on both sides consume (0 elsewhere).
+
+    Two blends that meet in the middle of a line may meet there with any common curvature; with the
+    line's own (0) a chain of short lines — a curve cut into chords — would curve in pulses, twice the
+    mean curvature at every vertex and straight between them. Instead they meet with the mean of the
+    two blends' average curvatures ``(t_out - t_in) / (2 ℓ)``, projected normal to the line: on a
+    circle cut into chords every blend is then close to an arc of the circle.
+    """
+    n = len(spans)
+    trim_start, trim_end = np.zeros(n), np.zeros(n)
+    trim_end[j], trim_start[j + 1] = ell, ell
+    k_mid = np.zeros((n, 3))
+    consumed = (
+        (spans.kind == SpanKind.LINE)
+        & (trim_start > 0)
+        & (trim_end > 0)
+        & (trim_start + trim_end >= spans.length * (1 - 1e-12))
+    )
+    i = np.flatnonzero(consumed)
+    if i.size == 0:
+        return k_mid
+    t = spans.tangent_in[i]
+    c_in = (t - spans.tangent_out[i - 1]) / (2 * trim_start[i])[:, None]
+    c_out = (spans.tangent_in[i + 1] - t) / (2 * trim_end[i])[:, None]
+    k = (c_in + c_out) / 2
+    k_mid[i] = k - t * np.sum(t * k, axis=1, keepdims=True)
+    return k_mid
 
 
 def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
@@ -165,18 +205,26 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     j, ell = j[keep_len], ell[keep_len]
     if j.size == 0:
         return spans
-    coeffs, qa, ta, tb = _blend_coeffs(spans, j, ell)
-    fit = poly.certify_curves(coeffs, qa, np.arange(j.size), speed_tol=poly.BLEND_SPEED_TOL, adaptive=False)
-    owner = fit["owner"]
-    fields_, table = poly_fields(
-        SpanKind.BLEND,
-        fit["coeffs"],
-        fit["origin"],
-        spans.block[j + 1][owner],
-        fit["length"],
-        fit["timing"],
-        exact_extents=False,
+    # chains of consumed lines: blends meet with a common curvature, where it keeps them within tol
+    k_mid = _chain_curvature(spans, j, ell)
+    for _ in range(CHAIN_ROUNDS):
+        chain = np.flatnonzero(np.any(k_mid[j] != 0, axis=1) | np.any(k_mid[j + 1] != 0, axis=1))
+        if chain.size == 0:
+            break
+        coeffs, _, _, _ = _blend_coeffs(spans, j[chain], ell[chain], k_mid)
+        bad = chain[_deviation(spans, j[chain], ell[chain], coeffs) > tol[j[chain]]]
+        if bad.size == 0:
+            break
+        k_mid[j[bad]] = 0.0  # back to the line's own curvature at both ends: the closed-form deviation
+        k_mid[j[bad] + 1] = 0.0
+    else:
+        k_mid[:] = 0.0
+    coeffs, qa, ta, tb = _blend_coeffs(spans, j, ell, k_mid)
+    fit = poly.certify_curves(
+        coeffs, qa, np.arange(j.size), speed_tol=poly.BLEND_SPEED_TOL, adaptive=False, n_check=BLEND_CHECK
     )
+    owner = fit["owner"]
+    fields_, table = poly_fields(SpanKind.BLEND, fit, spans.block[j + 1][owner], exact_extents=False)
     # a blend's ends have exactly its neighbours' tangents
     first = np.concatenate([[True], owner[1:] != owner[:-1]])
     last = np.concatenate([owner[1:] != owner[:-1], [True]])

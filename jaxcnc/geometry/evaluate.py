@@ -31,22 +31,29 @@ from jaxcnc.geometry.kinds import SpanKind
 def span_arrays(spans, xp: ModuleType = np) -> dict:
     """The fields the evaluation reads, in column layout, as ``xp`` arrays (``numpy`` or ``jax.numpy``)."""
 
+    if xp is np:
+        put = np.asarray
+    else:  # device_put: xp.asarray of a host array would compile a program per shape
+        import jax
+
+        put = jax.device_put
+
     def col(a: np.ndarray) -> np.ndarray:
-        return xp.asarray(np.ascontiguousarray(np.moveaxis(np.asarray(a), 0, -1)))
+        return put(np.ascontiguousarray(np.moveaxis(np.asarray(a), 0, -1)))
 
     arcs, polys = spans.arcs, spans.polys
     return {
-        "kind": xp.asarray(spans.kind),
-        "item": xp.asarray(spans.item),
-        "length": xp.asarray(spans.length),
+        "kind": put(spans.kind),
+        "item": put(spans.item),
+        "length": put(spans.length),
         "origin": col(spans.origin),
         "tangent": col(spans.tangent_in),
         "arc_center": col(arcs.center),
         "arc_e1": col(arcs.e1),
         "arc_e2": col(arcs.e2),
         "arc_axis": col(arcs.axis),
-        "arc_radius": xp.asarray(arcs.radius),
-        "arc_rise": xp.asarray(arcs.rise),
+        "arc_radius": put(arcs.radius),
+        "arc_rise": put(arcs.rise),
         "poly_coeffs": col(polys.coeffs),  # (p+1, 4, q)
         "poly_timing": col(polys.timing),  # (6, q)
     }
@@ -85,6 +92,8 @@ def _rational(c, item, u, order: int, xp) -> list:
             p.append((n[2] - 2.0 * p[1] * w[1] - p[0] * w[2]) / w[0])
         if order >= 3:
             p.append((n[3] - 3.0 * p[2] * w[1] - 3.0 * p[1] * w[2] - p[0] * w[3]) / w[0])
+        if order >= 4:
+            p.append((n[4] - 4.0 * p[3] * w[1] - 6.0 * p[2] * w[2] - 4.0 * p[1] * w[3] - p[0] * w[4]) / w[0])
         out.append(p)
     return out
 
@@ -108,6 +117,9 @@ def _poly(a: dict, span, s, order: int, xp):
             d.append(p[2] * vs[1] ** 2 + p[1] * vs[2])
         if order >= 3:
             d.append(p[3] * vs[1] ** 3 + 3.0 * p[2] * vs[1] * vs[2] + p[1] * vs[3])
+        if order >= 4:  # Faà di Bruno
+            v1, v2, v3, v4 = vs[1:5]
+            d.append(p[4] * v1**4 + 6.0 * p[3] * v1**2 * v2 + p[2] * (3.0 * v2**2 + 4.0 * v1 * v3) + p[1] * v4)
         out.append(d)
     return out
 
@@ -130,6 +142,8 @@ def _arc(a: dict, span, s, order: int, xp):
             d.append(-(omega**2) * r * (cos * e1 + sin * e2))
         if order >= 3:
             d.append(omega**3 * r * (sin * e1 - cos * e2))
+        if order >= 4:
+            d.append(omega**4 * r * (cos * e1 + sin * e2))
         out.append(d)
     return out
 
@@ -139,12 +153,12 @@ def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np) -> tupl
 
     Args:
         a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm.
-        order: highest derivative (0..3).
+        order: highest derivative (0..4).
     Returns:
         ``(q, q', ..., q^(order))``, each ``(m, 3)``: mm, then per mm of path parameter.
     """
-    if not 0 <= order <= 3:
-        raise ValueError("order must be 0, 1, 2 or 3")
+    if not 0 <= order <= 4:
+        raise ValueError("order must be 0 to 4")
     kind = a["kind"][span]
     s = xp.clip(s, 0.0, a["length"][span])
     line = kind == SpanKind.LINE

@@ -176,17 +176,27 @@ def path_derivatives(
     return out
 
 
-def _check_sigma(n: int) -> np.ndarray:
-    return np.broadcast_to(np.linspace(0.0, 1.0, N_CHECK), (n, N_CHECK))
+def check(coeffs: np.ndarray, tcoef: np.ndarray, length: np.ndarray, n_check: int = N_CHECK) -> dict[str, np.ndarray]:
+    """One pass over ``n_check`` points of each span: how far ``|q'|`` strays from 1, and the maxima.
 
-
-def timing_error(coeffs: np.ndarray, tcoef: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """``(S,)`` max ``||q'| - 1|`` over the check points; ``inf`` where ``V`` is not increasing."""
-    sig = _check_sigma(coeffs.shape[0])
+    Returns ``(S,)`` arrays: ``err`` (max ``||q'| - 1|``; ``inf`` where ``V`` is not increasing),
+    ``d1_max``, ``d2_max`` (maxima of ``|q'|``, ``|q''|`` in the path parameter) and ``kappa_max`` (the
+    curvature). Sampled maxima size the planner's grid and the look-ahead planner's caps; the tick
+    table is verified independently, and the ``topp`` planner checks between its nodes.
+    """
+    sig = np.broadcast_to(np.linspace(0.0, 1.0, n_check), (coeffs.shape[0], n_check))
     v1 = timing_derivatives(tcoef, sig, 1)[1]
-    d = path_derivatives(coeffs, tcoef, length, sig, 1)[1]
-    err = np.max(np.abs(np.linalg.norm(d, axis=-1) - 1.0), axis=1)
-    return np.where(np.all(v1 > 0, axis=1), err, np.inf)
+    _, d1, d2 = path_derivatives(coeffs, tcoef, length, sig, 2)
+    s1 = np.linalg.norm(d1, axis=-1)
+    err = np.max(np.abs(s1 - 1.0), axis=1)
+    moving = s1 > 1e-6 * np.max(s1, axis=1, keepdims=True)  # a cusp's own point has no curvature to speak of
+    kappa = np.where(moving, np.linalg.norm(np.cross(d1, d2), axis=-1) / np.where(moving, s1, 1.0) ** 3, 0.0)
+    return {
+        "err": np.where(np.all(v1 > 0, axis=1), err, np.inf),
+        "d1_max": s1.max(axis=1),
+        "d2_max": np.linalg.norm(d2, axis=-1).max(axis=1),
+        "kappa_max": kappa.max(axis=1),
+    }
 
 
 def certify_curves(
@@ -196,16 +206,18 @@ def certify_curves(
     max_rounds: int = 10,
     speed_tol: float = SPEED_TOL,
     adaptive: bool = True,
+    n_check: int = N_CHECK,
 ) -> dict[str, np.ndarray]:
     """Subdivide rational Bézier pieces until their lengths are certified and their timing polynomials
-    keep ``|q'|`` within ``speed_tol`` of 1.
+    keep ``|q'|`` within ``speed_tol`` of 1 (at ``n_check`` points).
 
     Args:
         coeffs ``(S, p+1, 4)``, origin ``(S, 3)``, owner ``(S,)`` (a per-piece tag carried along).
         adaptive: adaptive quadrature with an error bound (else one 16-point rule, for short smooth
             pieces such as blends; the bound is then 0 — the length only scales the parameter).
     Returns:
-        ``coeffs, origin, owner, length, length_err, timing`` in path order (halves stay in place).
+        ``coeffs, origin, owner, length, length_err, timing`` and the maxima of :func:`check`, in path
+        order (halves stay in place).
     """
     done: list[dict[str, np.ndarray]] = []
     order = np.arange(coeffs.shape[0], dtype=np.float64)  # keys that keep path order through splits
@@ -213,7 +225,8 @@ def certify_curves(
     for rnd in range(max_rounds):
         length, err = gl_length(coeffs) if adaptive else (fixed_length(coeffs), np.zeros(coeffs.shape[0]))
         tcoef = timing(coeffs, length)
-        ok = (timing_error(coeffs, tcoef, length) <= speed_tol) | (rnd == max_rounds - 1)
+        found = check(coeffs, tcoef, length, n_check)
+        ok = (found.pop("err") <= speed_tol) | (rnd == max_rounds - 1)
         done.append(
             dict(
                 coeffs=coeffs[ok],
@@ -223,6 +236,7 @@ def certify_curves(
                 length_err=err[ok],
                 timing=tcoef[ok],
                 key=order[ok],
+                **{k: v[ok] for k, v in found.items()},
             )
         )
         bad = ~ok
@@ -240,24 +254,6 @@ def certify_curves(
     out = {k: np.concatenate([d[k] for d in done]) for k in done[0]}
     idx = np.argsort(out.pop("key"), kind="stable")
     return {k: v[idx] for k, v in out.items()}
-
-
-def sampled_maxima(coeffs: np.ndarray, tcoef: np.ndarray, length: np.ndarray) -> dict[str, np.ndarray]:
-    """Maxima over each span of ``|q'|``, ``|q''|`` (path parameter) and the curvature ``κ``, sampled.
-
-    ``N_CHECK`` points per span; these size the planner's grid and the look-ahead planner's caps
-    (the tick table is verified independently, and the ``topp`` planner checks between its nodes).
-    """
-    sig = _check_sigma(coeffs.shape[0])
-    _, d1, d2 = path_derivatives(coeffs, tcoef, length, sig, 2)
-    s1 = np.linalg.norm(d1, axis=-1)
-    moving = s1 > 1e-6 * np.max(s1, axis=1, keepdims=True)  # a cusp's own point has no curvature to speak of
-    kappa = np.where(moving, np.linalg.norm(np.cross(d1, d2), axis=-1) / np.where(moving, s1, 1.0) ** 3, 0.0)
-    return {
-        "d1_max": s1.max(axis=1),
-        "d2_max": np.linalg.norm(d2, axis=-1).max(axis=1),
-        "kappa_max": kappa.max(axis=1),
-    }
 
 
 def end_frames(coeffs: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -264,35 +264,29 @@ def arc_fields(p: Program, rows: np.ndarray) -> tuple[dict[str, np.ndarray], Arc
 
 
 def poly_fields(
-    kind: SpanKind,
-    coeffs: np.ndarray,
-    origin: np.ndarray,
-    rows: np.ndarray,
-    length: np.ndarray,
-    tcoef: np.ndarray,
-    length_err: np.ndarray | None = None,
-    exact_extents: bool = True,
+    kind: SpanKind, fit: dict[str, np.ndarray], rows: np.ndarray, exact_extents: bool = True
 ) -> tuple[dict[str, np.ndarray], PolyTable]:
-    """Span fields and :class:`PolyTable` rows of rational Bézier pieces with their timing polynomials."""
+    """Span fields and :class:`PolyTable` rows of certified rational Bézier pieces
+    (:func:`~jaxcnc.geometry.poly.certify_curves`)."""
     from jaxcnc.geometry import poly
 
+    coeffs, origin = fit["coeffs"], fit["origin"]
     t0, _, t1, _ = poly.end_frames(coeffs)
-    maxima = poly.sampled_maxima(coeffs, tcoef, length)
     lo, hi = poly.extents(coeffs, origin) if exact_extents else poly.hull_extents(coeffs, origin)
-    n = len(rows)
     fields_ = dict(
-        kind=np.full(n, kind),
+        kind=np.full(len(rows), kind),
         block=rows,
-        length=length,
+        length=fit["length"],
         origin=origin,
         tangent_in=t0,
         tangent_out=t1,
         lo=lo,
         hi=hi,
-        **maxima,
+        kappa_max=fit["kappa_max"],
+        d1_max=fit["d1_max"],
+        d2_max=fit["d2_max"],
     )
-    err = np.zeros(n) if length_err is None else length_err
-    return fields_, PolyTable(coeffs=coeffs, timing=tcoef, length_err=err)
+    return fields_, PolyTable(coeffs=coeffs, timing=fit["timing"], length_err=fit["length_err"])
 
 
 def _curve_parts(p: Program, rows: np.ndarray) -> tuple[dict[str, np.ndarray], PolyTable]:
@@ -310,9 +304,7 @@ def _curve_parts(p: Program, rows: np.ndarray) -> tuple[dict[str, np.ndarray], P
         origin.append(bp[:, 0])
         owner.append(np.full(bp.shape[0], r))
     fit = certify_curves(np.concatenate(coeffs), np.concatenate(origin), np.concatenate(owner))
-    return poly_fields(
-        SpanKind.CURVE, fit["coeffs"], fit["origin"], fit["owner"], fit["length"], fit["timing"], fit["length_err"]
-    )
+    return poly_fields(SpanKind.CURVE, fit, fit["owner"])
 
 
 def span_degree(program: Program, min_degree: int = 2) -> int:

@@ -7,11 +7,16 @@ spans ``|q'|`` is close to 1). The phase-plane planner (:mod:`jaxcnc.planners.ph
 ``q'`` and ``q''`` at the ends of each interval on which it holds ``s̈`` constant:
 
 * a line has constant ``q'`` and ``q'' = 0``: one interval per line is exact;
-* an arc, NURBS piece or blend is cut into equal intervals turning by at most ``MAX_TURN_RAD``
+* an arc or NURBS piece is cut into equal intervals turning by at most ``MAX_TURN_RAD``
   each, so that ``q'`` and ``q''`` change little inside one (the planner keeps ``GRID_MARGIN`` of
-  the acceleration for what they do change and checks interval midpoints; the tick table is
-  verified independently); a blend gets at least ``MIN_BLEND_INTERVALS``, so that a node sits at
-  its curvature peak;
+  the acceleration for what they do change and checks interval midpoints, cutting finer where
+  needed; the tick table is verified independently);
+* a blend is cut into intervals turning by at most ``BLEND_TURN_RAD``, each with a *box*: bounds
+  of ``q'`` and ``q''`` over the whole interval — ``BOX_SAMPLES`` samples, widened by ``h²/8`` times the
+  largest second derivative of each (``q'''`` resp. ``q''''`` sampled, times ``BOX_SAFETY``),
+  which bounds how far a function rises between samples ``h`` apart above the higher of them — so
+  the planner's rows hold everywhere inside and a blend needs no refinement
+  (:mod:`jaxcnc.planners.phaseplane`);
 * a point span (dwell, event) is one interval of zero length.
 
 The grid depends on the geometry alone — not on the feed or the tick rate — so a program plans to
@@ -21,6 +26,7 @@ the same motion at any tick rate.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -33,8 +39,15 @@ from jaxcnc.geometry.spans import Spans, pad_spans
 from jaxcnc.planners.buckets import bucket_size
 
 MAX_TURN_RAD = 0.0175  # 1°
-#: Intervals of a blend before refinement (the middle node sits on its curvature peak).
-MIN_BLEND_INTERVALS = 2
+#: A boxed (blend) interval turns at most this much, and a blend piece has at least this many
+#: (the box of one interval spans the piece's whole range of q' and q''; four narrow them enough that
+#: the CAM polylines and the peers' programs plan within 0.3 % of the unboxed planner's times).
+BLEND_TURN_RAD = np.deg2rad(5.0)
+BLEND_MIN_INTERVALS = 4
+#: Samples of the path's derivatives 1-4 per boxed interval (ends included).
+BOX_SAMPLES = 9
+#: Safety factor on the sampled derivative maxima that widen a box.
+BOX_SAFETY = 1.25
 #: Fraction of the acceleration kept back on curved intervals for the change of q' and q'' inside one.
 GRID_MARGIN = 2e-3
 MAX_INTERVALS_PER_SPAN = 1 << 16
@@ -51,6 +64,9 @@ class Grid:
         t_a, k_a: ``(m, 3)`` ``q'`` and ``q''`` (1/mm) at the interval's start.
         t_b, k_b: ``(m, 3)`` the same at its end.
         curved: ``(m,)`` bool, the interval lies on an arc, NURBS piece or blend.
+        boxed: ``(m,)`` bool, the interval has a box (blends): ``t_lo ≤ q' ≤ t_hi`` and
+            ``k_lo ≤ q'' ≤ k_hi`` ``(m, 3)`` componentwise everywhere inside it (elsewhere copies of
+            the start's values, unused).
     """
 
     span: np.ndarray
@@ -61,6 +77,11 @@ class Grid:
     t_b: np.ndarray
     k_b: np.ndarray
     curved: np.ndarray
+    boxed: np.ndarray
+    t_lo: np.ndarray
+    t_hi: np.ndarray
+    k_lo: np.ndarray
+    k_hi: np.ndarray
 
     def __len__(self) -> int:
         return int(self.span.shape[0])
@@ -74,17 +95,17 @@ def is_curved(kind: np.ndarray) -> np.ndarray:
 def interval_counts(spans: Spans) -> np.ndarray:
     """``(n,)`` number of grid intervals of each span (1 for lines and points), from its turning."""
     turning = spans.length * spans.kappa_max
-    n = np.ceil(turning / MAX_TURN_RAD)
-    n = np.where(spans.kind == SpanKind.BLEND, np.maximum(n, MIN_BLEND_INTERVALS), n)
+    blend = spans.kind == SpanKind.BLEND
+    n = np.ceil(turning / np.where(blend, BLEND_TURN_RAD, MAX_TURN_RAD))
+    n = np.where(blend, np.maximum(n, BLEND_MIN_INTERVALS), n)
     n = np.where(is_curved(spans.kind), np.clip(n, 1, MAX_INTERVALS_PER_SPAN), 1)
     return n.astype(np.int64)
 
 
-@jax.jit
-def path_frame(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """``q'`` and ``q''`` ``(m, 3)`` at ``s`` along span ``span`` ``(m,)``."""
-    _, d1, d2 = evaluate_path(arrays, span, s, 2, xp=jnp)
-    return d1, d2
+@partial(jax.jit, static_argnames=("order",))
+def path_frame(arrays: dict, span: jnp.ndarray, s: jnp.ndarray, order: int = 2) -> tuple[jnp.ndarray, ...]:
+    """The path's derivatives 1..``order`` (each ``(m, 3)``) at ``s`` along span ``span`` ``(m,)``."""
+    return evaluate_path(arrays, span, s, order, xp=jnp)[1:]
 
 
 def device_spans(spans: Spans) -> dict[str, jnp.ndarray]:
@@ -92,7 +113,7 @@ def device_spans(spans: Spans) -> dict[str, jnp.ndarray]:
     return span_arrays(pad_spans(spans, bucket_size(len(spans))), xp=jnp)
 
 
-def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray, order: int = 2) -> tuple[np.ndarray, ...]:
     """:func:`path_frame` for NumPy queries ``(q,)``, padded to a bucket (few compiled sizes).
 
     ``arrays`` comes from :func:`device_spans`.
@@ -102,8 +123,7 @@ def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray) -> tuple[np.ndarray
     which = np.zeros(m, np.int64)
     where = np.zeros(m)
     which[:q], where[:q] = span, s
-    t, k = path_frame(arrays, jnp.asarray(which), jnp.asarray(where))
-    return np.asarray(t)[:q], np.asarray(k)[:q]
+    return tuple(np.asarray(d)[:q] for d in path_frame(arrays, which, where, order))
 
 
 def build_grid(spans: Spans, counts: np.ndarray, arrays: dict | None = None) -> Grid:
@@ -120,14 +140,48 @@ def build_grid(spans: Spans, counts: np.ndarray, arrays: dict | None = None) -> 
     s_end = np.where(last, spans.length[span], (j + 1) * step[span])  # the span's end exactly
     delta = s_end - s_start
     curved = is_curved(spans.kind)[span]
+    boxed = spans.kind[span] == SpanKind.BLEND
     t_a = np.array(spans.tangent_in[span])
     t_b = np.array(spans.tangent_out[span])
     k_a = np.zeros_like(t_a)
     k_b = np.zeros_like(t_b)
-    idx = np.flatnonzero(curved)
-    if idx.size:
+    plain = np.flatnonzero(curved & ~boxed)
+    box = np.flatnonzero(boxed)
+    if plain.size or box.size:
         arrays = device_spans(spans) if arrays is None else arrays
-        t, k = frames_at(arrays, np.concatenate([span[idx], span[idx]]), np.concatenate([s_start[idx], s_end[idx]]))
-        t_a[idx], t_b[idx] = t[: idx.size], t[idx.size :]
-        k_a[idx], k_b[idx] = k[: idx.size], k[idx.size :]
-    return Grid(span=span, s_start=s_start, delta=delta, t_a=t_a, k_a=k_a, t_b=t_b, k_b=k_b, curved=curved)
+    if plain.size:
+        t, k = frames_at(arrays, np.concatenate([span[plain]] * 2), np.concatenate([s_start[plain], s_end[plain]]))
+        t_a[plain], t_b[plain] = t[: plain.size], t[plain.size :]
+        k_a[plain], k_b[plain] = k[: plain.size], k[plain.size :]
+    t_lo, t_hi, k_lo, k_hi = t_a.copy(), t_a.copy(), k_a.copy(), k_a.copy()
+    if box.size:
+        # BOX_SAMPLES points per interval, ends included; between samples h apart a function rises
+        # above the chord between them (so above the higher sample) by at most h²/8 max|f''|
+        frac = np.linspace(0.0, 1.0, BOX_SAMPLES)
+        where = s_start[box, None] + delta[box, None] * frac[None, :]
+        where[:, -1] = s_end[box]
+        t, k, d3, d4 = (
+            d.reshape(box.size, BOX_SAMPLES, 3)
+            for d in frames_at(arrays, np.repeat(span[box], BOX_SAMPLES), where.ravel(), order=4)
+        )
+        h2 = (BOX_SAFETY * (delta[box] / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
+        t_pad = np.abs(d3).max(axis=1) * h2
+        k_pad = np.abs(d4).max(axis=1) * h2
+        t_a[box], t_b[box], k_a[box], k_b[box] = t[:, 0], t[:, -1], k[:, 0], k[:, -1]
+        t_lo[box], t_hi[box] = t.min(axis=1) - t_pad, t.max(axis=1) + t_pad
+        k_lo[box], k_hi[box] = k.min(axis=1) - k_pad, k.max(axis=1) + k_pad
+    return Grid(
+        span=span,
+        s_start=s_start,
+        delta=delta,
+        t_a=t_a,
+        k_a=k_a,
+        t_b=t_b,
+        k_b=k_b,
+        curved=curved,
+        boxed=boxed,
+        t_lo=t_lo,
+        t_hi=t_hi,
+        k_lo=k_lo,
+        k_hi=k_hi,
+    )

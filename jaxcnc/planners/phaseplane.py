@@ -1,30 +1,34 @@
 """Time-optimal speed along a fixed path in the phase plane ``(s, x = ṡ²)``, per-axis limits coupled.
 
 On a grid interval of length ``Δ`` the path acceleration ``u = s̈`` is held constant, so ``x``
-is linear in ``s``: ``x_b = x_a + 2 Δ u``. Axis ``i`` accelerates at ``q̈_i = T_i u + K_i x``
-(:mod:`jaxcnc.planners.grid`); the limit ``|q̈_i| ≤ A_i`` is imposed at *both* ends of the
-interval (at the end with ``x_b`` substituted), which makes every constraint linear in ``(u, x_a)``:
+is linear in ``s``: ``x_b = x_a + 2 Δ u``. Axis ``i`` accelerates at ``q̈_i = q'_i u + q''_i x``
+(:mod:`jaxcnc.planners.grid`). The limit ``|q̈_i| ≤ A_i`` is imposed at *both* ends of the interval
+(at the end with ``x_b`` substituted), which makes every constraint linear in ``(u, x_a)``. Where
+the grid gives an interval a *box* — bounds ``q'_i ∈ [T_lo, T_hi]``, ``q''_i ∈ [K_lo, K_hi]`` over the
+whole interval (blends) — the rows use its corners: as ``x ≥ 0`` and ``x(s)`` lies between ``x_a``
+and ``x_b``,
 
-    ±( T_ia u + K_ia x_a )                  ≤ A_i      (start)
-    ±( (T_ib + 2Δ K_ib) u + K_ib x_a )      ≤ A_i      (end)
-    x_a + 2Δ u ≤ cap_b,   x_a + 2Δ u ≥ 0,   x_a ≤ cap_a
+    T u + K_hi x ≤ A      and      -(T u + K_lo x) ≤ A      for T ∈ {T_lo, T_hi}, x ∈ {x_a, x_b}
 
-— rows ``gu·u + gx·x ≤ h`` of shape ``(m, R)``. Tangential and centripetal acceleration share
-each axis' budget exactly, with their signs (toppra's "interpolation" discretisation; its
-default collocation imposes the limit only at the start, which is why its profiles overshoot
-between grid points).
+bound ``q̈_i`` everywhere inside, so such an interval needs no check between its nodes. At a plain
+end ``T_lo = T_hi`` and ``K_lo = K_hi`` are the values there. With the speed rows
+``x_a + 2Δ u ≤ cap_b``, ``x_a + 2Δ u ≥ 0``, ``x_a ≤ cap_a`` these are rows ``gu·u + gx·x ≤ h`` of shape
+``(m, R)``, four per axis. Tangential and centripetal acceleration share each axis' budget exactly, with their
+signs (toppra's "interpolation" discretisation; its default collocation imposes the limit only at
+the start, which is why its profiles overshoot between grid points).
 
-Eliminating ``u`` (Fourier–Motzkin) gives what the planner needs without a solver:
+What the planner needs, without a solver:
 
-* every pair of a lower row ``j`` (``gu < 0``) and an upper row ``m`` (``gu > 0``) bounds ``x``
-  from above; their minimum is the largest admissible ``x`` at the interval's start
-  (``static_cap``: the maximum-velocity curve, with both ends and the velocity caps);
-* the pairs formed with the row ``x_a + 2Δ u ≤ K_b`` give the backward (controllable-set) step
-  ``K_a = min(x_static, min_j (α_j K_b + β_j))``; the forward step takes the largest ``u``
-  at the reached ``x_a``. Both are one ``lax.scan`` over the intervals.
+* every pair of a lower row ``j`` (``gu < 0``) and an upper row ``m`` (``gu > 0``) bounds ``x`` from
+  above; their minimum is the largest admissible ``x`` at the interval's start (``static_cap``: the
+  maximum-velocity curve, with both ends and the velocity caps);
+* eliminating ``u`` between each lower row ``j`` and the row ``x_a + 2Δ u ≤ K_b`` gives
+  the backward (controllable-set) step ``K_a = min(x_static, min_j (α_j K_b + β_j))``; the forward
+  step takes the largest ``u`` at the reached ``x_a``. Both are one ``lax.scan`` over the intervals
+  (on a CPU a sequential scan costs ~20 ns a step and compiles in milliseconds).
 
-On lines (``K = 0``) every ``α_j = 1``: the steps reduce to ``min(B, x + D)`` and the
-associative look-ahead scan (:mod:`jaxcnc.planners.lookahead`) computes them in O(log m) depth.
+On lines (``K = 0``) every ``α_j = 1``: the steps reduce to
+``min(B, x + D)`` and the look-ahead scan (:mod:`jaxcnc.planners.lookahead`) computes them.
 """
 
 from __future__ import annotations
@@ -47,20 +51,44 @@ def constraint_rows(
     k_b: jnp.ndarray,
     a_max: jnp.ndarray,
     cap_b: jnp.ndarray,
+    box: tuple[jnp.ndarray, ...] | None = None,
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
     """Rows ``gu·u + gx·x_a ≤ h`` of every interval, each ``(m, 4·n_axes + 2)``.
 
     Args:
-        delta: ``(m,)`` interval lengths (mm); t_a, k_a, t_b, k_b: ``(m, n_axes)`` frames at the ends.
+        delta: ``(m,)`` interval lengths (mm); t_a, k_a, t_b, k_b: ``(m, n_axes)`` ``q'`` and ``q''`` at
+            the start and the end.
         a_max: ``(m, n_axes)`` acceleration budget of each axis on each interval (mm/s²).
         cap_b: ``(m,)`` cap on ``x`` at the interval's end.
+        box: optional ``(boxed (m,), t_lo, t_hi, k_lo, k_hi (m, n_axes))``: where ``boxed``, the rows
+            hold for every ``q'`` and ``q''`` in the box. Each axis keeps four rows either way: in a
+            box the rows of one side share ``gx`` (``K_hi`` resp. ``-K_lo``) and differ in ``gu`` alone
+            (``T`` or ``T + 2Δ K`` for ``T`` in ``{T_lo, T_hi}``), so the largest and the smallest ``gu``
+            imply the other two.
     """
     two_d = 2.0 * delta[:, None]
-    gu_end = t_b + two_d * k_b
-    gu = jnp.concatenate([t_a, -t_a, gu_end, -gu_end, two_d, -two_d], axis=1)
-    gx = jnp.concatenate([k_a, -k_a, k_b, -k_b, jnp.ones_like(two_d), -jnp.ones_like(two_d)], axis=1)
-    h = jnp.concatenate([a_max, a_max, a_max, a_max, cap_b[:, None], jnp.zeros_like(two_d)], axis=1)
-    return gu, gx, h
+    up = [(t_a, k_a), (t_b + two_d * k_b, k_b)]
+    lo = [(-t_a, -k_a), (-(t_b + two_d * k_b), -k_b)]
+    if box is not None:
+        boxed, t_lo, t_hi, k_lo, k_hi = box
+        b = boxed[:, None]
+        g_up = [t_lo, t_hi, t_lo + two_d * k_hi, t_hi + two_d * k_hi]
+        g_lo = [-t_lo, -t_hi, -(t_lo + two_d * k_lo), -(t_hi + two_d * k_lo)]
+        box_up = [
+            (jnp.maximum(jnp.maximum(g_up[0], g_up[1]), jnp.maximum(g_up[2], g_up[3])), k_hi),
+            (jnp.minimum(jnp.minimum(g_up[0], g_up[1]), jnp.minimum(g_up[2], g_up[3])), k_hi),
+        ]
+        box_lo = [
+            (jnp.maximum(jnp.maximum(g_lo[0], g_lo[1]), jnp.maximum(g_lo[2], g_lo[3])), -k_lo),
+            (jnp.minimum(jnp.minimum(g_lo[0], g_lo[1]), jnp.minimum(g_lo[2], g_lo[3])), -k_lo),
+        ]
+        up = [(jnp.where(b, bu, pu), jnp.where(b, bx, px)) for (pu, px), (bu, bx) in zip(up, box_up, strict=True)]
+        lo = [(jnp.where(b, bu, pu), jnp.where(b, bx, px)) for (pu, px), (bu, bx) in zip(lo, box_lo, strict=True)]
+    rows = up + lo
+    gu = [r[0] for r in rows] + [two_d, -two_d]
+    gx = [r[1] for r in rows] + [jnp.ones_like(two_d), -jnp.ones_like(two_d)]
+    h = [a_max] * len(rows) + [cap_b[:, None], jnp.zeros_like(two_d)]
+    return jnp.concatenate(gu, axis=1), jnp.concatenate(gx, axis=1), jnp.concatenate(h, axis=1)
 
 
 def _ratio(num: jnp.ndarray, den: jnp.ndarray, ok: jnp.ndarray) -> jnp.ndarray:
@@ -68,21 +96,35 @@ def _ratio(num: jnp.ndarray, den: jnp.ndarray, ok: jnp.ndarray) -> jnp.ndarray:
 
 
 def static_cap(gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, cap_a: jnp.ndarray) -> jnp.ndarray:
-    """``(m,)`` largest ``x_a`` for which some ``u`` satisfies all rows (Fourier–Motzkin on ``u``)."""
-    up = gu > GU_EPS
-    lo = gu < -GU_EPS
-    flat = ~up & ~lo
-    x_flat = jnp.min(_ratio(h, gx, flat & (gx > 0)), axis=1)
-    # u ≤ (h_m - gx_m x)/gu_m and u ≥ (h_j - gx_j x)/gu_j: x (gx_m/gu_m - gx_j/gu_j) ≤ h_m/gu_m - h_j/gu_j
-    r_up = jnp.where(up, gx / jnp.where(up, gu, 1.0), 0.0)
-    c_up = jnp.where(up, h / jnp.where(up, gu, 1.0), 0.0)
-    r_lo = jnp.where(lo, gx / jnp.where(lo, gu, 1.0), 0.0)
-    c_lo = jnp.where(lo, h / jnp.where(lo, gu, 1.0), 0.0)
-    coef = r_up[:, None, :] - r_lo[:, :, None]  # (m, lower j, upper m)
-    rhs = c_up[:, None, :] - c_lo[:, :, None]
-    pair = lo[:, :, None] & up[:, None, :] & (coef > 0)
-    x_pair = jnp.min(_ratio(rhs, coef, pair), axis=(1, 2))
-    return jnp.maximum(jnp.minimum(jnp.minimum(cap_a, x_flat), x_pair), 0.0)
+    """``(m,)`` largest ``x_a`` for which some ``u`` satisfies every row but ``x_b ≤ cap_b`` (Fourier–Motzkin).
+
+    Every pair of a lower row ``j`` (``gu < 0``) and an upper row ``m`` (``gu > 0``) bounds ``x`` from
+    above; so does a row without ``u``. The row ``x_b ≤ cap_b`` is left to the backward step, whose
+    ``K_b`` never exceeds ``cap_b``: an interval that must slow down towards its end is entered
+    faster than its end allows.
+    """
+    n_rows = gu.shape[1]
+    cols = [*range(n_rows - 2), n_rows - 1]  # the axis rows and x_b ≥ 0
+    g, x, hh = ([a[:, c] for c in cols] for a in (gu, gx, h))
+    up = [gi > GU_EPS for gi in g]
+    lo = [gi < -GU_EPS for gi in g]
+    safe = [jnp.where(up[i] | lo[i], g[i], 1.0) for i in range(len(g))]
+    r = [x[i] / safe[i] for i in range(len(g))]  # u ≤ or ≥ c - r x, by the sign of gu
+    c = [hh[i] / safe[i] for i in range(len(g))]
+    best = cap_a
+    for i in range(len(g)):  # rows without u bound x alone
+        flat = ~up[i] & ~lo[i] & (x[i] > 0)
+        best = jnp.minimum(best, jnp.where(flat, hh[i] / jnp.where(flat, x[i], 1.0), jnp.inf))
+    # u ≤ c_m - r_m x (upper m) and u ≥ c_j - r_j x (lower j): x (r_m - r_j) ≤ c_m - c_j. The pairs are
+    # unrolled: XLA fuses them into one pass over the intervals (an (m, R, R) tensor would not be).
+    for a in range(len(g)):
+        for b in range(a + 1, len(g)):
+            a_up = up[a] & lo[b]
+            coef = jnp.where(a_up, r[a] - r[b], r[b] - r[a])
+            rhs = jnp.where(a_up, c[a] - c[b], c[b] - c[a])
+            ok = (a_up | (up[b] & lo[a])) & (coef > 0)
+            best = jnp.minimum(best, jnp.where(ok, rhs / jnp.where(ok, coef, 1.0), jnp.inf))
+    return jnp.maximum(best, 0.0)
 
 
 def backward_pieces(

@@ -10,8 +10,9 @@ velocity steps the built-in planners allow at near-tangent kinks, nor the chord-
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
-import jax.numpy as jnp
+import jax
 import numpy as np
 
 from jaxcnc.geometry.kinds import SpanKind
@@ -62,13 +63,8 @@ def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
     s = np.concatenate([[0.0], np.cumsum(grid.delta)])
     f_int = req.feed_mm_s[grid.span]
     feed = np.minimum(np.concatenate([f_int, f_int[-1:]]), np.concatenate([f_int[:1], f_int]))
-    _, j_cap = junctions(
-        jnp.asarray(spans.kind),
-        jnp.asarray(spans.tangent_in),
-        jnp.asarray(spans.tangent_out),
-        jnp.asarray(req.stop_before),
-        jnp.asarray(req.a_max),
-        req.machine.tick_hz,
+    _, j_cap = jax.jit(junctions, static_argnames=("tick_hz",))(
+        spans.kind, spans.tangent_in, spans.tangent_out, req.stop_before, req.a_max, tick_hz=req.machine.tick_hz
     )
     rest_span = np.concatenate([[True], np.asarray(j_cap) == 0.0, [True]])  # rest at span boundary b
     first_node = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)  # node index of each span boundary
@@ -95,11 +91,13 @@ def plan_from_nodes(p: RefProblem, x_node: np.ndarray, req: PlanRequest) -> Plan
     x0, x1 = x[:-1], x[1:]
     two_d = 2.0 * np.where(g.delta > 0, g.delta, 1.0)
     dwell = np.where(g.s_start == 0, req.dwell_s[g.span], 0.0)
-    prof = trapezoids(
-        jnp.asarray(x), jnp.asarray(np.maximum(x0, x1)), jnp.asarray(np.abs(x1 - x0) / two_d), g.delta, dwell
-    )
-    out = align_to_ticks(prof, jnp.asarray(x0 == 0.0), req.machine.tick_hz)
+    out = _profile(x, np.maximum(x0, x1), np.abs(x1 - x0) / two_d, g.delta, dwell, x0 == 0.0, req.machine.tick_hz)
     return plan_from_outputs(out, g.delta, g.span, g.s_start, req.machine.tick_hz)
+
+
+@partial(jax.jit, static_argnames=("tick_hz",))
+def _profile(x, x_cap, a, delta, dwell, rest, tick_hz: float) -> dict:
+    return align_to_ticks(trapezoids(x, x_cap, a, delta, dwell), rest, tick_hz)
 
 
 def import_optional(name: str):

@@ -121,14 +121,14 @@ class SmoothPlan:
         big = np.iinfo(np.int64).max
 
         def pad(a: np.ndarray, fill=0) -> jnp.ndarray:
-            return jnp.asarray(np.pad(a, (0, m - n), constant_values=fill))
+            return jax.device_put(np.pad(a, (0, m - n), constant_values=fill))
 
         out = {k: pad(getattr(base, k), big if k == "first_tick" else 0) for k in PLAN_KEYS}
         out["length"] = pad(base.length)
         out["seg_s_in_group"] = pad(self.seg_s_in_group)
         out["seg_prefix"] = pad(self.seg_prefix)
         for k in ("g_start", "g_ticks", "g_new_start", "g_s0", "g_len", "g_first_seg", "g_last_seg"):
-            out[k] = jnp.asarray(getattr(self, k))
+            out[k] = jax.device_put(getattr(self, k))
         return out
 
     def s_at(self, ticks: np.ndarray) -> np.ndarray:
@@ -139,9 +139,9 @@ class SmoothPlan:
         for i in range(0, t.shape[0], CHUNK):
             part = t[i : i + CHUNK]
             padded = np.pad(part, (0, CHUNK - part.shape[0]), mode="edge") if part.size else part
-            out[i : i + part.shape[0]] = np.asarray(
-                s_of_ticks(arrays, jnp.asarray(padded), self.window_ticks, self.tick_hz)
-            )[: part.shape[0]]
+            out[i : i + part.shape[0]] = np.asarray(s_of_ticks(arrays, padded, self.window_ticks, self.tick_hz))[
+                : part.shape[0]
+            ]
         return out
 
     def ticks_at_s(self, s: np.ndarray) -> np.ndarray:
@@ -177,6 +177,9 @@ def _segment_integral(plan: dict, seg: jnp.ndarray, tau: jnp.ndarray) -> jnp.nda
     )  # fmt: skip
 
 
+_segment_integral_jit = jax.jit(lambda plan, seg, tau: _segment_integral(plan, seg, tau))
+
+
 def _group_integral(plan: dict, g: jnp.ndarray, tau: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
     """``A_g(τ) = ∫ s_g`` from group ``g``'s start to ``τ`` ticks after it (0 before, linear after its end)."""
     whole = plan["g_ticks"][g]
@@ -202,10 +205,9 @@ def s_of_ticks(plan: dict, ticks: jnp.ndarray, window_ticks: int, tick_hz: float
 
 def _segment_integral_np(plan: Plan) -> np.ndarray:
     """``∫ s_local`` over each whole segment (NumPy), from the same closed form."""
-    arrays = {k: jnp.asarray(getattr(plan, k)) for k in PLAN_KEYS}
-    arrays["length"] = jnp.asarray(plan.length)
-    seg = jnp.arange(len(plan))
-    return np.asarray(_segment_integral(arrays, seg, jnp.asarray(plan.duration_s)))
+    arrays = {k: getattr(plan, k) for k in PLAN_KEYS}
+    arrays["length"] = plan.length
+    return np.asarray(_segment_integral_jit(arrays, np.arange(len(plan)), plan.duration_s))
 
 
 def smooth(plan: Plan, window_ticks: int, s_start_of_segment: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
@@ -247,7 +249,7 @@ def span_starts(spans) -> tuple[dict, jnp.ndarray]:
     padded = pad_spans(spans, bucket_size(n))
     span_s0 = padded.s0
     span_s0[n:] = np.inf
-    return span_arrays(padded, xp=jnp), jnp.asarray(span_s0)
+    return span_arrays(padded, xp=jnp), jax.device_put(span_s0)
 
 
 @jax.jit
@@ -279,7 +281,7 @@ def span_peaks(
     for first in range(0, total, CHUNK):
         last_chunk = first + CHUNK >= total
         ticks = np.arange(first, min(first + CHUNK, total))
-        p, span = positions_at_s(arrays, span_s0, jnp.asarray(plan.s_at(ticks)))
+        p, span = positions_at_s(arrays, span_s0, plan.s_at(ticks))
         p, span = np.asarray(p), np.asarray(span)
         if tail is None:
             tail = np.repeat(p[:1], 3, axis=0)

@@ -17,6 +17,7 @@ tick plus a float offset (in ticks) inside the group, so an hour at 100 kHz lose
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -221,16 +222,21 @@ def v_at(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick
 def sample_plan(plan: Plan, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The time law at integer ``ticks``: ``(segment, s_mm, v_mm_s)``, each ``(m,)``.
 
-    ``s_mm`` is the path length from the program start — the ``s(t)`` researchers compare
-    between planners; ``v_mm_s`` its derivative.
+    ``s_mm`` is the path parameter from the program start (arc length on lines and arcs, within
+    1e-6 of it on curves) — the ``s(t)`` researchers compare between planners; ``v_mm_s`` its
+    derivative.
     """
-    arrays = {k: jnp.asarray(getattr(plan, k)) for k in PLAN_KEYS}
-    t = jnp.asarray(np.asarray(ticks, dtype=np.int64))
+    arrays = {k: getattr(plan, k) for k in PLAN_KEYS}
+    out = _sample(arrays, plan.length, np.asarray(ticks, dtype=np.int64), plan.tick_hz)
+    return tuple(np.asarray(a) for a in out)
+
+
+@partial(jax.jit, static_argnames=("tick_hz",))
+def _sample(arrays: dict, length: jnp.ndarray, t: jnp.ndarray, tick_hz: float):
     seg = segment_of_tick(arrays["first_tick"], t)
-    length = jnp.asarray(plan.length)
-    s_local = s_at(arrays, length, seg, t, plan.tick_hz)
+    s_local = s_at(arrays, length, seg, t, tick_hz)
     s0 = jnp.concatenate([jnp.zeros(1), jnp.cumsum(length)[:-1]])
-    return np.asarray(seg), np.asarray(s0[seg] + s_local), np.asarray(v_at(arrays, seg, t, plan.tick_hz))
+    return seg, s0[seg] + s_local, v_at(arrays, seg, t, tick_hz)
 
 
 def segment_of_tick(first_tick: jnp.ndarray, tick: jnp.ndarray) -> jnp.ndarray:

@@ -61,6 +61,14 @@ def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndar
     return jnp.minimum(x_axis, jnp.where(speed > 0, (v_tool / safe) ** 2, jnp.inf))
 
 
+def box_speed_cap(t_lo: jnp.ndarray, t_hi: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndarray) -> jnp.ndarray:
+    """``(m,)`` cap on ``x`` from the axis speeds and the feed anywhere in a box ``t_lo ≤ q' ≤ t_hi`` ``(m, 3)``."""
+    t_abs = jnp.maximum(jnp.abs(t_lo), jnp.abs(t_hi))
+    x_axis = jnp.min(jnp.where(t_abs > 0, (v_max / jnp.where(t_abs > 0, t_abs, 1.0)) ** 2, jnp.inf), axis=1)
+    speed = jnp.linalg.norm(t_abs, axis=1)
+    return jnp.minimum(x_axis, jnp.where(speed > 0, (feed / jnp.where(speed > 0, speed, 1.0)) ** 2, jnp.inf))
+
+
 def jerk_cap(k_a: jnp.ndarray, k_b: jnp.ndarray, delta: jnp.ndarray, j_max: jnp.ndarray) -> jnp.ndarray:
     """``(m,)`` cap on ``x = v²`` on intervals where the curvature changes, from the axes' jerk limits.
 
@@ -96,6 +104,10 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
     vel = jnp.minimum(v_max, BIG)[None, :] * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)[:, None]
     vcap_a = speed_cap(g["t_a"], g["k_a"], vel, g["feed"], chord_tol, tick_hz)
     vcap_b = speed_cap(g["t_b"], g["k_b"], vel, g["feed"], chord_tol, tick_hz)
+    # in a box the axis speeds and the feed are capped everywhere inside, not at the ends alone
+    vcap_box = box_speed_cap(g["t_lo"], g["t_hi"], vel, g["feed"])
+    vcap_a = jnp.where(g["boxed"], jnp.minimum(vcap_a, vcap_box), vcap_a)
+    vcap_b = jnp.where(g["boxed"], jnp.minimum(vcap_b, vcap_box), vcap_b)
     is_point = sp["kind"][span] == SpanKind.POINT
     cap_a = jnp.where(is_point, 0.0, jnp.where(first, jnp.minimum(vcap_a, cap_start[span]), vcap_a))
     cap_b = jnp.where(is_point, 0.0, jnp.where(last, jnp.minimum(vcap_b, cap_end[jnp.clip(span, 0, n - 1)]), vcap_b))
@@ -104,7 +116,8 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
         x_jerk = jerk_cap(g["k_a"], g["k_b"], g["delta"], j_max)
         cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
     delta = g["delta"]
-    gu, gx, h = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b)
+    box = (g["boxed"], g["t_lo"], g["t_hi"], g["k_lo"], g["k_hi"])
+    gu, gx, h = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b, box)
     x_node = solve(gu, gx, h, delta, cap_a, jnp.zeros(()), curved_any)
     x0, x1 = x_node[:-1], x_node[1:]
     # Lines: a trapezoid under the span's speed cap with the axes' tangential budget.
@@ -127,7 +140,7 @@ def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarra
     vary smoothly and little on an interval), and an interval whose parabola peaks above
     ``1 - GRID_MARGIN/2`` of the budget is cut finer. ``arrays``: :func:`~jaxcnc.planners.grid.device_spans`.
     """
-    idx = np.flatnonzero(grid.curved & (grid.delta > 0))
+    idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
     bad = np.zeros(len(grid), bool)
     if idx.size == 0:
         return bad
@@ -222,6 +235,11 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         "t_b": pad_rows(grid.t_b, mb, 0.0),
         "k_b": pad_rows(grid.k_b, mb, 0.0),
         "curved": pad_rows(grid.curved, mb, False),
+        "boxed": pad_rows(grid.boxed, mb, False),
+        "t_lo": pad_rows(grid.t_lo, mb, 0.0),
+        "t_hi": pad_rows(grid.t_hi, mb, 0.0),
+        "k_lo": pad_rows(grid.k_lo, mb, 0.0),
+        "k_hi": pad_rows(grid.k_hi, mb, 0.0),
         "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
         "dwell": pad_rows(np.where(grid.s_start == 0, req.dwell_s[s], 0.0), mb, 0.0),
     }
@@ -240,11 +258,11 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
     out = plan_grid(
         g,
         sp,
-        jnp.asarray(req.v_max) * keep,
-        jnp.asarray(req.a_max) * keep,
+        np.asarray(req.v_max) * keep,
+        np.asarray(req.a_max) * keep,
         machine.path.chord_tol_mm,
         machine.tick_hz,
         curved_any=bool(grid.curved.any()),
-        j_max=jnp.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
+        j_max=np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}

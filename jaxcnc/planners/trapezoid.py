@@ -84,8 +84,8 @@ def plan_lookahead(req: PlanRequest) -> Plan:
     keep = 1.0 - NUMERIC_MARGIN
     out = plan_arrays(
         *args,
-        jnp.asarray(req.v_max) * keep,
-        jnp.asarray(req.a_max) * keep,
+        np.asarray(req.v_max) * keep,
+        np.asarray(req.a_max) * keep,
         machine.path.chord_tol_mm,
         machine.tick_hz,
     )

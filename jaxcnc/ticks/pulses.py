@@ -44,8 +44,8 @@ class TrajectorySampler:
         self.traj, self.chunk = traj, chunk
         n = len(traj)
         m = bucket_size(n)
-        self._start = jnp.asarray(np.concatenate([traj.start_tick, np.full(m - n, np.inf)]))
-        self._coeffs = jnp.asarray(np.concatenate([traj.coeffs, np.zeros((m - n, 4, 3))]))
+        self._start = jax.device_put(np.concatenate([traj.start_tick, np.full(m - n, np.inf)]))
+        self._coeffs = jax.device_put(np.concatenate([traj.coeffs, np.zeros((m - n, 4, 3))]))
         names = machine.axis_names
         self._src = np.array([PROGRAM_AXES.index(a) if a in PROGRAM_AXES else -1 for a in names])
         self._home = np.array([machine.axis(a).home for a in names])
@@ -57,7 +57,7 @@ class TrajectorySampler:
     def program_positions(self, first: int, count: int) -> np.ndarray:
         """Exact x, y, z ``(count, 3)`` mm of ticks ``first..first+count-1``."""
         p = _trajectory_chunk(
-            jnp.int64(first), jnp.int64(self.traj.n_ticks), self._start, self._coeffs, self.traj.tick_hz, self.chunk
+            np.int64(first), np.int64(self.traj.n_ticks), self._start, self._coeffs, self.traj.tick_hz, self.chunk
         )
         return np.asarray(p)[:count]
 

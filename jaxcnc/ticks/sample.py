@@ -87,7 +87,7 @@ class TickSampler:
             return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
 
         keys = PLAN_KEYS + ("length", "span", "s_start")
-        self._plan = {k: jnp.asarray(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in keys}
+        self._plan = {k: jax.device_put(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in keys}
         self._spans = span_arrays(pad_spans(spans, bucket_size(len(spans))), xp=jnp)
 
     @property
@@ -99,14 +99,14 @@ class TickSampler:
         plan = self.job.plan
         if isinstance(plan, SmoothPlan):
             ticks = np.minimum(np.arange(first, first + self.chunk), plan.n_ticks)
-            p, span = positions_at_s(self._spans, self._span_s0, jnp.asarray(plan.s_at(ticks)))
+            p, span = positions_at_s(self._spans, self._span_s0, plan.s_at(ticks))
             return np.asarray(p)[:count], np.asarray(span)[:count]
         p, seg = _positions_chunk(
-            jnp.int64(first),
-            jnp.int64(self.job.plan.n_ticks),
+            np.int64(first),
+            np.int64(self.job.plan.n_ticks),
             self._plan,
             self._spans,
-            jnp.float64(self.job.machine.tick_hz),
+            np.float64(self.job.machine.tick_hz),
             self.chunk,
         )
         return np.asarray(p)[:count], np.asarray(seg)[:count]

@@ -82,7 +82,7 @@ def plan_seed(req: PulseRequest) -> PulsePlan:
     # look-ahead: pass a point moving only where the blocks on both sides are collinear
     collinear = np.max(np.abs(u[1:] - u[:-1]), axis=1) < COLLINEAR
     node_cap = np.concatenate([[0.0], np.where(collinear, np.minimum(v_cap[1:], v_cap[:-1]) ** 2, 0.0), [0.0]])
-    x = np.asarray(lookahead(jnp.asarray(node_cap), jnp.asarray(2.0 * a * length)))
+    x = np.asarray(jax.jit(lookahead)(np.asarray(node_cap), np.asarray(2.0 * a * length)))
     v1_max = np.sqrt(np.minimum(x[1:], v_cap**2))
     # The documents' braking check (S_brake <= S_(i+1)): end no faster than the next block can
     # stop from, so that whatever window the next block needs, slowing down can reach it.
@@ -92,13 +92,13 @@ def plan_seed(req: PulseRequest) -> PulsePlan:
     vp, v1, ticks, m, missed = (
         np.asarray(r)
         for r in _seed_scan(
-            jnp.asarray(length),
-            jnp.asarray(a),
-            jnp.asarray(v_cap),
-            jnp.asarray(v1_max),
-            jnp.asarray(free),
-            jnp.int64(w.n_min),
-            jnp.int64(w.n_max),
+            np.asarray(length),
+            np.asarray(a),
+            np.asarray(v_cap),
+            np.asarray(v1_max),
+            np.asarray(free),
+            np.int64(w.n_min),
+            np.int64(w.n_max),
             jnp.bool_(w.idle_pulses),
             jnp.float64(f),
         )

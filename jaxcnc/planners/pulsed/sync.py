@@ -108,18 +108,18 @@ def plan_sync(req: PulseRequest) -> PulsePlan:
     d0[:2] = int(np.ceil(max(np.sqrt(6.0 * approach / a_min), 1.5 * approach / req.rapid_mm_s) * f / 2))
     d0 = np.where(gap, w.snap_up(d0)[0], np.maximum(d0, w.n_min))
     d, m, coeffs, iters, worst = solve_durations(
-        jnp.asarray(d0),
-        jnp.asarray(y_pad),
-        jnp.int64(k),
-        jnp.asarray(gap),
-        jnp.asarray(caps),
-        jnp.asarray(req.v_max),
-        jnp.asarray(req.a_max),
-        jnp.asarray(req.j_max),
-        jnp.int64(w.n_min),
-        jnp.int64(w.n_max),
+        np.asarray(d0),
+        np.asarray(y_pad),
+        np.int64(k),
+        np.asarray(gap),
+        np.asarray(caps),
+        np.asarray(req.v_max),
+        np.asarray(req.a_max),
+        np.asarray(req.j_max),
+        np.int64(w.n_min),
+        np.int64(w.n_max),
         jnp.bool_(w.idle_pulses),
-        jnp.float64(f),
+        np.float64(f),
     )
     d, m, coeffs = (np.asarray(a) for a in jax.device_get((d, m, coeffs)))
     if float(worst) > 1.0:
