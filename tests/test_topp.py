@@ -67,8 +67,8 @@ def test_lines_sequential_scan_equals_associative_scan():
     acc = np.tile([1000.0, 800.0, 500.0], (m, 1))
     cap = rng.uniform(0.0, 1e4, m + 1)
     cap[0] = cap[-1] = 0.0  # at rest at both ends, as every plan is
-    gu, gx, h = constraint_rows(*(jnp.asarray(a) for a in (delta, t, 0 * t, t, 0 * t, acc, cap[1:])))
-    args = (gu, gx, h, jnp.asarray(delta), jnp.asarray(np.minimum(cap[:-1], 1e4)), jnp.zeros(()))
+    rows = constraint_rows(*(jnp.asarray(a) for a in (delta, t, 0 * t, t, 0 * t, acc, cap[1:])))
+    args = (rows, jnp.asarray(delta), jnp.asarray(np.minimum(cap[:-1], 1e4)), jnp.zeros(()))
     np.testing.assert_allclose(np.asarray(solve(*args, True)), np.asarray(solve(*args, False)), rtol=1e-9, atol=1e-6)
 
 

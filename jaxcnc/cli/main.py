@@ -252,14 +252,22 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def check_table(table_path: Path, machine_path: Path, points: Path | None = None):
-    """Verify a table: checksums, limits, travel and, for pulsed tables, pulses. ``(table, measurement)``.
+def check_table(
+    table_path: Path,
+    machine_path: Path,
+    points: Path | None = None,
+    program: Path | None = None,
+    dialect: str | None = None,
+):
+    """Verify a table: checksums, limits, travel, the path and, for pulsed tables, pulses. ``(table, measurement)``.
 
-    The measurement's violations include the pulse problems; its ``pulses`` attribute holds the
-    pulse check (``None`` for tables without work pulses).
+    The measurement's violations include the pulse and path problems; its ``pulses`` attribute holds the
+    pulse check (``None`` for tables without work pulses), ``path`` the distances from the programmed
+    path (``None`` when not compared; ``path_note`` says why: no G-code source, or it is not here).
     """
     from jaxcnc.hw.tablefile import EventKind, TableFile
     from jaxcnc.machine import load_machine
+    from jaxcnc.ticks.deviation import path_deviation, program_for_table
     from jaxcnc.ticks.verify import measure_table
 
     machine = load_machine(machine_path)
@@ -271,6 +279,10 @@ def check_table(table_path: Path, machine_path: Path, points: Path | None = None
         job = _points_of_table(table, machine, points)
         meas.pulses = check_pulses(table, machine, job)
         meas.violations.extend(meas.pulses.violations)
+    prog, meas.path_note = program_for_table(table, machine, GCODE_SUFFIXES, program, dialect)
+    if prog is not None:
+        meas.path = path_deviation(table, machine, prog)
+        meas.violations.extend(meas.path.violations)
     return table, meas
 
 
@@ -289,13 +301,32 @@ def _points_of_table(table, machine, points: Path | None):
     return load_point_job(source, machine)
 
 
+def _path_line(meas) -> str:
+    """The check's summary of the path comparison."""
+    if meas.path is None:
+        return f"  path: not compared: {meas.path_note}"
+    pd = meas.path
+    away = "no tick" if pd.n_away == 0 else f"{pd.max_away_mm:.3g} mm"
+    return (
+        f"  path: max deviation {pd.max_mm:.4g} mm from the programmed path at tick {pd.worst_tick} "
+        f"(line {pd.worst_line}, allowed {pd.allowed_at_worst_mm:.4g} mm); away from corners {away}"
+    )
+
+
 def cmd_check(args: argparse.Namespace) -> int:
-    table, meas = check_table(Path(args.table), Path(args.machine), Path(args.points) if args.points else None)
+    table, meas = check_table(
+        Path(args.table),
+        Path(args.machine),
+        Path(args.points) if args.points else None,
+        Path(args.program) if args.program else None,
+        args.dialect,
+    )
     h = table.header
     if meas.ok:
+        checked = "travel, limits and path hold" if meas.path is not None else "travel and limits hold"
         print(
             f"OK {args.table}: {h.n_rows} ticks ({(h.n_rows - 1) / h.tick_hz:.3f} s at {h.tick_hz:g} Hz), "
-            f"checksums, travel and limits hold"
+            f"checksums, {checked}"
         )
         print(f"  max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}")
         if meas.pulses is not None:
@@ -305,12 +336,16 @@ def cmd_check(args: argparse.Namespace) -> int:
                 f"{pc.max_interval_ticks} ticks, all in the window; every point burned once, beam within "
                 f"{pc.max_miss_mm * 1e3:.2g} µm of it"
             )
+        if meas.path is not None or meas.pulses is None:
+            print(_path_line(meas))
         return 0
     shown = meas.violations if args.max_lines <= 0 else meas.violations[: args.max_lines]
     for v in shown:
         print(v)
     if len(shown) < len(meas.violations):
         print(f"... and {len(meas.violations) - len(shown)} more violations")
+    if meas.path is not None or meas.pulses is None:
+        print(_path_line(meas))
     print(f"FAILED {args.table}: {len(meas.violations)} violations", file=sys.stderr)
     return 1
 
@@ -510,15 +545,24 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser(
         "check",
         help="verify a table against a machine's limits",
-        description="Independently verify a table: checksums, travel, and per-axis speed and "
-        "acceleration at every tick. Exit 0 only if everything holds; otherwise one line per "
-        "violation (tick, axis, value, limit).",
+        description="Independently verify a table: checksums, travel, per-axis speed and "
+        "acceleration at every tick and, when the program it was planned from is here, every tick's distance "
+        "from the programmed path against the blend tolerance (G64 P). Exit 0 only if everything holds; "
+        "otherwise one line per violation (tick, axis or line, value, limit).",
     )
     sp.add_argument("table", help="table file")
     sp.add_argument("--machine", "-m", required=True, help="machine description (TOML)")
     sp.add_argument("--max-lines", type=int, default=100, help="print at most this many violations (0: all)")
     sp.add_argument(
         "--points", help="pulsed tables: the point file to check the work pulses against (default: the table's source)"
+    )
+    sp.add_argument(
+        "--program",
+        help="the G-code program to measure the path against (default: the table's source when it is here and "
+        "unchanged; otherwise the path is not compared, which is said)",
+    )
+    sp.add_argument(
+        "--dialect", help="G-code dialect of the program: linuxcnc (default), siemens, fanuc or a dialect TOML file"
     )
     sp.set_defaults(func=cmd_check)
 

@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import SourceError
+from jaxcnc.gcode import fastpath
 from jaxcnc.gcode.dialect import LINUXCNC, Dialect, load_dialect
+from jaxcnc.gcode.fastpath import PlainTable, RunResult, RunState, interpret_run, plain_table
 from jaxcnc.gcode.lexer import Word, tokenize
 from jaxcnc.gcode.preprocess import MAX_DEPTH, MAX_LINES, expand
 from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
@@ -202,6 +204,7 @@ class _Interpreter:
         self.s = _State(pos=np.asarray(start, dtype=np.float64).copy(), arc_absolute=dialect.arc_centers_absolute)
         self.ended = False
         self.machine_coords = False  # G53 in the current block
+        self.chunks: list[dict[str, np.ndarray]] = []  # finished rows, as column arrays, in order
 
     # -- rows -------------------------------------------------------------------------------
     def emit(
@@ -499,9 +502,12 @@ class _Interpreter:
             if d > 1e-9:
                 # Move the centre onto the chord's perpendicular bisector: the arc then passes
                 # exactly through both programmed points (a shift of at most the tolerance).
+                # (Written out rather than np.dot, whose BLAS kernel may fuse the multiply-add: the bulk
+                # path in fastpath.py computes the same expression element by element, bit for bit.)
                 mid = (start[:2] + end[:2]) / 2
                 n = np.array([-chord[1], chord[0]]) / d
-                c2 = mid + float(np.dot(c2 - mid, n)) * n
+                off = c2 - mid
+                c2 = mid + float(off[0] * n[0] + off[1] * n[1]) * n
         center = np.empty(3)
         center[list(perm)] = [c2[0], c2[1], start[2]]
         self.emit(Kind.ARC, b.line, end_prog, center=center, turn=-1 if cw else 1, feed=self.feed_mm_s(b, first))
@@ -696,12 +702,67 @@ class _Interpreter:
             )
             raise SourceError(self.file, nb.line, nb.column, f"{nb.kind} NURBS {what}")
 
-    def program(self) -> dict[str, np.ndarray]:
+    def flush_rows(self) -> None:
+        """Move the rows emitted one by one into :attr:`chunks` (before a run's rows follow them)."""
         r = self.s.rows
+        if not r["kind"]:
+            return
         out = {k: np.asarray(v) for k, v in r.items()}
         for k in ("start", "end", "center"):
             out[k] = np.asarray(r[k], dtype=np.float64).reshape(-1, 3)
-        return out
+        self.chunks.append(out)
+        self.s.rows = {k: [] for k in PROGRAM_COLUMNS}
+
+    # -- runs of plain blocks (fastpath.py) ---------------------------------------------------
+    def fast_ready(self) -> bool:
+        """Plain blocks can be executed in bulk from here (no spline is open or modal)."""
+        s = self.s
+        return s.nurbs is None and s.motion in (None, 0, 10, 20, 30)
+
+    def run_state(self) -> RunState:
+        s = self.s
+        return RunState(
+            pos=s.pos.copy(),
+            scale=s.scale,
+            absolute=s.absolute,
+            arc_absolute=s.arc_absolute,
+            offset=self.offset.copy(),
+            motion=s.motion,
+            feed_raw=s.feed_raw,
+            power=s.power,
+            laser=s.laser,
+            plane=s.plane,
+            plane_axes=PLANE_AXES[s.plane],
+            exact_stop=s.exact_stop,
+            blend_tol=s.blend_tol,
+            pending_stop=s.pending_stop,
+            arc_tol=ARC_RADIUS_TOL_MM if s.scale == 1.0 else ARC_RADIUS_TOL_INCH * MM_PER_INCH,
+        )
+
+    def run_plain(self, table: PlainTable, a: int, b: int, lines: np.ndarray) -> RunResult:
+        """Execute plain blocks ``a:b`` in bulk; see :func:`~jaxcnc.gcode.fastpath.interpret_run`."""
+        res = interpret_run(table, a, b, lines, self.run_state())
+        if res.blocks == 0:
+            return res
+        s = self.s
+        if res.columns is not None and res.columns["kind"].size:
+            self.flush_rows()
+            self.chunks.append(res.columns)
+            s.pending_stop = False
+        s.pos = res.pos
+        s.motion, s.feed_raw, s.power = res.motion, res.feed_raw, res.power
+        if res.any_words:
+            self.machine_coords = False
+        return res
+
+    def program(self) -> dict[str, np.ndarray]:
+        self.flush_rows()
+        if not self.chunks:
+            out = {k: np.asarray([]) for k in PROGRAM_COLUMNS}
+            for k in ("start", "end", "center"):
+                out[k] = out[k].reshape(-1, 3)
+            return out
+        return {k: np.concatenate([c[k] for c in self.chunks]) for k in PROGRAM_COLUMNS}
 
 
 def parse_gcode(
@@ -714,11 +775,15 @@ def parse_gcode(
     max_depth: int = MAX_DEPTH,
     max_lines: int = MAX_LINES,
     dialect: str | Dialect | None = None,
+    fast: bool = True,
 ) -> Program:
     """Interpret G-code ``text`` into a Program.
 
     Parametric programs (parameters, expressions, O-words) are flattened first by
-    :mod:`jaxcnc.gcode.preprocess`.
+    :mod:`jaxcnc.gcode.preprocess`. Runs of plain motion blocks (G0-G3 with X Y Z I J K R F S N
+    and comments; see :mod:`jaxcnc.gcode.fastpath`) are tokenised and executed in bulk with NumPy;
+    every other block goes through the line-by-line interpreter. Both give the same Program, bit for
+    bit, and the same errors.
 
     Args:
         text: the program.
@@ -729,6 +794,7 @@ def parse_gcode(
         max_depth, max_lines: limits on subroutine nesting and executed lines.
         dialect: ``"linuxcnc"`` (default), ``"siemens"``, ``"fanuc"``, a dialect TOML file or a
             :class:`~jaxcnc.gcode.dialect.Dialect`.
+        fast: use the bulk path for plain blocks (``False``: every block line by line, the reference).
 
     Raises:
         SourceError: naming ``file:line:column``, the word and the reason.
@@ -736,20 +802,38 @@ def parse_gcode(
     dia = load_dialect(dialect)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
     it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia)
-    last = None
     if _NEEDS_PREPROCESSOR.search(text):
-        blocks = [(e.text, e.line) for e in expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia)]
+        expanded = expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia)
+        texts = [e.text for e in expanded]
+        lines = np.fromiter((e.line for e in expanded), dtype=np.int64, count=len(expanded))
     else:
-        blocks = []
-        percent_seen = False
-        for line_no, raw in enumerate(text.splitlines(), 1):
-            if raw.strip() == "%":
-                if percent_seen:
-                    break  # the second '%' ends the program
-                percent_seen = True
-                continue
-            blocks.append((raw, line_no))
-    for raw, line_no in blocks:
+        texts = text.splitlines()
+        if "%" in text:
+            marks = [i for i, raw in enumerate(texts) if "%" in raw and raw.strip() == "%"]
+            if len(marks) > 1:
+                del texts[marks[1] :]  # the second '%' ends the program
+            if marks:
+                texts[marks[0]] = ""  # the first opens it
+        lines = np.arange(1, len(texts) + 1, dtype=np.int64)
+    # A one-letter keyword of a dialect would read as a word letter: such dialects go line by line.
+    fast = fast and bool(texts) and all(len(k) > 1 for k in dia.keywords)
+    table = plain_table(texts, dia.paren_comments, dia.semicolon_comments) if fast else None
+    last = None
+    i, n = 0, len(texts)
+    slow_until = 0  # blocks before this index go line by line (a run reached a non-finite number)
+    while i < n:
+        if table is not None and i >= slow_until and table.plain[i] and it.fast_ready():
+            end = table.run_end(i)
+            if end - i >= fastpath.MIN_RUN:
+                res = it.run_plain(table, i, end, lines)
+                i += res.blocks
+                if res.nonfinite:
+                    slow_until = end
+                if i == end:
+                    continue
+                # block i would raise an error (or overflow): the interpreter executes it below
+        raw, line_no = texts[i], int(lines[i])
+        i += 1
         stripped = raw.lstrip()
         if stripped.startswith("/"):
             if block_delete:
@@ -762,7 +846,7 @@ def parse_gcode(
         it.block(last)
         if it.ended:
             break
-    it.close(last)
+    it.close(last)  # (a run of plain blocks never leaves a spline open: ``last`` is only read then)
     curves = make_curve_table(it.s.curves) if it.s.curves else None
     return program_from_columns(file=file, curves=curves, **it.program())
 

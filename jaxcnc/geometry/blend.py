@@ -37,11 +37,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry import poly
-from jaxcnc.geometry.bezier import homogeneous_power
+from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
+from jaxcnc.geometry.blend_kernel import blend_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, Spans, assemble, merge_polys, poly_fields
+from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -50,8 +52,6 @@ MIN_TURN_RAD = 1e-9
 MAX_TURN_RAD = np.deg2rad(150.0)
 #: Points of a blend where its distance to the replaced path is measured.
 N_DEVIATION = 17
-#: Points of a blend where its path parameter and maxima are checked (it is short and smooth).
-BLEND_CHECK = 9
 #: Rounds of shrinking a blend whose measured deviation exceeds the tolerance.
 SHRINK_ROUNDS = 8
 #: Rounds of giving up a chain curvature where a blend would leave the tolerance.
@@ -113,10 +113,10 @@ def _piece_distance(p: np.ndarray, spans: Spans, idx: np.ndarray, s_lo: np.ndarr
     return out
 
 
-def _blend_coeffs(
+def _blend_points(
     spans: Spans, i: np.ndarray, ell: np.ndarray, k_mid: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Quintic G2 blends of junctions after spans ``i`` cut back by ``ell``: ``(coeffs, A, Ta, Tb)``.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quintic G2 blends of junctions after spans ``i`` cut back by ``ell``: control points ``(J, 6, 3)``, Ta, Tb.
 
     ``k_mid``: ``(n, 3)`` curvature vectors at the middles of consumed lines (:func:`_chain_curvature`),
     used where a blend starts or ends there.
@@ -131,8 +131,25 @@ def _blend_coeffs(
     p2 = 2 * p1 - qa + lam**2 / 20 * ka
     p4 = qb - lam / 5 * tb
     p3 = 2 * p4 - qb + lam**2 / 20 * kb
-    pts = np.stack([qa, p1, p2, p3, p4, qb], axis=1)
-    return homogeneous_power(pts, np.ones(pts.shape[:2]), qa), qa, ta, tb
+    return np.stack([qa, p1, p2, p3, p4, qb], axis=1), ta, tb
+
+
+def _coeffs(pts: np.ndarray) -> np.ndarray:
+    """Homogeneous power-basis coefficients of Bézier control points ``(J, 6, 3)``, relative to ``P0``."""
+    return homogeneous_power(pts, np.ones(pts.shape[:2]), pts[:, 0])
+
+
+def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`~jaxcnc.geometry.blend_kernel.blend_kernel` on NumPy arrays, padded to a bucket."""
+    n = pts.shape[0]
+    m = bucket_size(n)
+    pad_pts = np.concatenate([pts, np.broadcast_to(_UNIT_BLEND, (m - n, 6, 3))])
+    pad_corner = np.concatenate([corner, np.zeros((m - n, 3))])
+    return {k: np.asarray(v)[:n] for k, v in blend_kernel(pad_pts, pad_corner).items()}
+
+
+#: A harmless blend (a straight quintic) for the padding rows of :func:`_kernel`.
+_UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axis=1)
 
 
 def _deviation(spans: Spans, i: np.ndarray, ell: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
@@ -194,8 +211,8 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     for _ in range(SHRINK_ROUNDS):
         if check.size == 0:
             break
-        coeffs, _, _, _ = _blend_coeffs(spans, j[check], ell[check])
-        dev = _deviation(spans, j[check], ell[check], coeffs)
+        pts, _, _ = _blend_points(spans, j[check], ell[check])
+        dev = _deviation(spans, j[check], ell[check], _coeffs(pts))
         bad = dev > tol[j[check]]
         ell[check[bad]] *= np.clip(0.95 * tol[j[check[bad]]] / dev[bad], 0.05, 0.95)
         check = check[bad]
@@ -206,31 +223,20 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     if j.size == 0:
         return spans
     # chains of consumed lines: blends meet with a common curvature, where it keeps them within tol
+    # chains of consumed lines: blends meet with a common curvature, where it keeps them within tol
     k_mid = _chain_curvature(spans, j, ell)
-    for _ in range(CHAIN_ROUNDS):
-        chain = np.flatnonzero(np.any(k_mid[j] != 0, axis=1) | np.any(k_mid[j + 1] != 0, axis=1))
-        if chain.size == 0:
-            break
-        coeffs, _, _, _ = _blend_coeffs(spans, j[chain], ell[chain], k_mid)
-        bad = chain[_deviation(spans, j[chain], ell[chain], coeffs) > tol[j[chain]]]
+    corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
+    lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
+    for _ in range(CHAIN_ROUNDS + 1):
+        pts, ta, tb = _blend_points(spans, j, ell, k_mid)
+        found = _kernel(pts, corner)
+        chain = np.any(k_mid[j] != 0, axis=1) | np.any(k_mid[j + 1] != 0, axis=1)
+        bad = np.flatnonzero(chain & lines & (found["dev"] > tol[j]))
         if bad.size == 0:
             break
         k_mid[j[bad]] = 0.0  # back to the line's own curvature at both ends: the closed-form deviation
         k_mid[j[bad] + 1] = 0.0
-    else:
-        k_mid[:] = 0.0
-    coeffs, qa, ta, tb = _blend_coeffs(spans, j, ell, k_mid)
-    fit = poly.certify_curves(
-        coeffs, qa, np.arange(j.size), speed_tol=poly.BLEND_SPEED_TOL, adaptive=False, n_check=BLEND_CHECK
-    )
-    owner = fit["owner"]
-    fields_, table = poly_fields(SpanKind.BLEND, fit, spans.block[j + 1][owner], exact_extents=False)
-    # a blend's ends have exactly its neighbours' tangents
-    first = np.concatenate([[True], owner[1:] != owner[:-1]])
-    last = np.concatenate([owner[1:] != owner[:-1], [True]])
-    fields_["tangent_in"][first] = ta[owner[first]]
-    fields_["tangent_out"][last] = tb[owner[last]]
-    fields_["item"] = len(spans.polys) + np.arange(owner.size)
+    fields_, table, owner = _blend_fields(spans, j, pts, found, ta, tb)
     trim_start = np.zeros(len(spans))
     trim_end = np.zeros(len(spans))
     trim_end[j] = ell
@@ -239,8 +245,68 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
     cols = {k: np.concatenate([trimmed[k][alive], fields_[k]]) for k in trimmed}
     # a blend's pieces before its second span, in order
-    key = np.concatenate([np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5])
+    key = np.concatenate(
+        [np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))]
+    )
     return assemble(cols, key, arcs, merge_polys([spans.polys, table]))
+
+
+def _blend_fields(
+    spans: Spans, j: np.ndarray, pts: np.ndarray, found: dict, ta: np.ndarray, tb: np.ndarray
+) -> tuple[dict[str, np.ndarray], PolyTable, np.ndarray]:
+    """Blend spans (span fields, poly table rows, owning junction of each piece), each blend split in
+    halves until its path parameter is within ``BLEND_SPEED_TOL`` of arc length."""
+    parts, owner = [], np.arange(j.size)
+    key = owner.astype(np.float64)
+    width = 1.0
+    for rnd in range(poly.MAX_SPLITS + 1):
+        ok = (found["err"] <= poly.BLEND_SPEED_TOL) | (rnd == poly.MAX_SPLITS)
+        parts.append((found, pts, ok, owner, key))
+        bad = ~ok
+        if not bad.any():
+            break
+        coeffs = _coeffs(pts[bad])
+        n_bad = int(bad.sum())
+        half = np.full(n_bad, 0.5)
+        halves = [restrict(coeffs, pts[bad, 0], a, b) for a, b in ((np.zeros(n_bad), half), (half, np.ones(n_bad)))]
+        pts = np.concatenate([power_to_bezier(c) + o[:, None] for c, o in halves])
+        owner = np.concatenate([owner[bad], owner[bad]])
+        width /= 2
+        key = np.concatenate([key[bad], key[bad] + width])
+        found = _kernel(pts, pts[:, 0])
+    cols: dict[str, list] = {}
+    for found_k, pts_k, ok, owner_k, key_k in parts:
+        for name, val in (("found", None), ("origin", pts_k[:, 0]), ("owner", owner_k), ("key", key_k)):
+            if name == "found":
+                for f, v in found_k.items():
+                    cols.setdefault(f, []).append(v[ok])
+            else:
+                cols.setdefault(name, []).append(val[ok])
+    out = {k: np.concatenate(v) for k, v in cols.items()}
+    order = np.argsort(out.pop("key"), kind="stable")
+    out = {k: v[order] for k, v in out.items()}
+    owner = out["owner"]
+    # a blend's ends have exactly its neighbours' tangents
+    first = np.concatenate([[True], owner[1:] != owner[:-1]])
+    last = np.concatenate([owner[1:] != owner[:-1], [True]])
+    t_in, t_out = out["t0"].copy(), out["t1"].copy()
+    t_in[first], t_out[last] = ta[owner[first]], tb[owner[last]]
+    n = owner.size
+    fields_ = dict(
+        kind=np.full(n, SpanKind.BLEND),
+        block=spans.block[j + 1][owner],
+        length=out["length"],
+        origin=out["origin"],
+        tangent_in=t_in,
+        tangent_out=t_out,
+        kappa_max=out["kappa_max"],
+        d1_max=out["d1_max"],
+        d2_max=out["d2_max"],
+        lo=out["lo"],
+        hi=out["hi"],
+        item=len(spans.polys) + np.arange(n),
+    )
+    return fields_, PolyTable(coeffs=out["coeffs"], timing=out["timing"], length_err=np.zeros(n)), owner
 
 
 def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[dict[str, np.ndarray], ArcTable]:

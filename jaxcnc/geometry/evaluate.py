@@ -148,12 +148,13 @@ def _arc(a: dict, span, s, order: int, xp):
     return out
 
 
-def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np) -> tuple:
+def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, poly_only: bool = False) -> tuple:
     """Position and derivatives in ``s`` of span ``span[i]`` at ``s[i]`` mm from its start.
 
     Args:
         a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm.
         order: highest derivative (0..4).
+        poly_only: every queried span is a polynomial span (skips the other kinds' formulas).
     Returns:
         ``(q, q', ..., q^(order))``, each ``(m, 3)``: mm, then per mm of path parameter.
     """
@@ -165,14 +166,16 @@ def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np) -> tupl
     arc = kind == SpanKind.ARC
     poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
     polys = _poly(a, span, s, order, xp) if a["poly_timing"].shape[-1] else None
-    arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] else None
+    arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] and not poly_only else None
     zero = xp.zeros_like(s)
     cols = [[] for _ in range(order + 1)]
     for i in range(3):
         o, t = a["origin"][i][span], a["tangent"][i][span]
         lin = [o + xp.where(line, s, 0.0) * t, xp.where(line, t, 0.0)] + [zero] * (order - 1)
         val = lin[: order + 1]
-        if polys is not None:
+        if poly_only:
+            val = [o + polys[i][0]] + polys[i][1:]
+        elif polys is not None:
             pv = [o + polys[i][0]] + polys[i][1:]
             val = [xp.where(poly, pv[r], val[r]) for r in range(order + 1)]
         if arcs is not None:

@@ -31,6 +31,8 @@ LENGTH_TOL_MM = 1e-10
 SPEED_TOL = 1e-6
 #: Blends (corners: not run at a constant feed) are split until it is within this of 1.
 BLEND_SPEED_TOL = 1e-3
+#: A blend is halved at most this many times (a 150° corner needs about four).
+MAX_SPLITS = 6
 #: Interior points where a timing polynomial is checked (and maxima are sampled).
 N_CHECK = 33
 _GX, _GW = np.polynomial.legendre.leggauss(GL_ORDER)

@@ -33,10 +33,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans
-from jaxcnc.planners.buckets import bucket_size
 
 MAX_TURN_RAD = 0.0175  # 1°
 #: A boxed (blend) interval turns at most this much, and a blend piece has at least this many
@@ -45,7 +45,7 @@ MAX_TURN_RAD = 0.0175  # 1°
 BLEND_TURN_RAD = np.deg2rad(5.0)
 BLEND_MIN_INTERVALS = 4
 #: Samples of the path's derivatives 1-4 per boxed interval (ends included).
-BOX_SAMPLES = 9
+BOX_SAMPLES = 5
 #: Safety factor on the sampled derivative maxima that widen a box.
 BOX_SAFETY = 1.25
 #: Fraction of the acceleration kept back on curved intervals for the change of q' and q'' inside one.
@@ -126,6 +126,40 @@ def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray, order: int = 2) -> 
     return tuple(np.asarray(d)[:q] for d in path_frame(arrays, which, where, order))
 
 
+@jax.jit
+def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray) -> tuple[jnp.ndarray, ...]:
+    """Ends and boxes of ``q'`` and ``q''`` on intervals ``[s0, s0 + delta]`` of polynomial spans.
+
+    ``BOX_SAMPLES`` points per interval, ends included; between samples ``h`` apart a function rises
+    above the chord between them (so above the higher sample) by at most ``h²/8 max|f''|``.
+    """
+    frac = jnp.linspace(0.0, 1.0, BOX_SAMPLES)
+    where = (s0[:, None] + delta[:, None] * frac[None, :]).ravel()
+    spans = jnp.repeat(span, BOX_SAMPLES)
+    _, t, k, d3, d4 = (
+        d.reshape(span.shape[0], BOX_SAMPLES, 3) for d in evaluate_path(arrays, spans, where, 4, jnp, True)
+    )
+    h2 = (BOX_SAFETY * (delta / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
+    t_pad = jnp.max(jnp.abs(d3), axis=1) * h2
+    k_pad = jnp.max(jnp.abs(d4), axis=1) * h2
+    return (
+        t[:, 0], k[:, 0], t[:, -1], k[:, -1],
+        jnp.min(t, axis=1) - t_pad, jnp.max(t, axis=1) + t_pad,
+        jnp.min(k, axis=1) - k_pad, jnp.max(k, axis=1) + k_pad,
+    )  # fmt: skip
+
+
+def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`_boxes` for NumPy queries ``(q,)``, padded to a bucket: ``(t_a, k_a, t_b, k_b, t_lo, t_hi, k_lo,
+    k_hi)``, each ``(q, 3)``."""
+    q = span.size
+    m = bucket_size(q)
+    which, a, d = np.zeros(m, np.int64), np.zeros(m), np.zeros(m)
+    which[:q], a[:q], d[:q] = span, s0, delta
+    which[q:] = span[0] if q else 0
+    return tuple(np.asarray(x)[:q] for x in _boxes(arrays, which, a, d))
+
+
 def build_grid(spans: Spans, counts: np.ndarray, arrays: dict | None = None) -> Grid:
     """Cut ``spans`` into ``counts[k]`` equal intervals each and evaluate the frame at their ends.
 
@@ -155,21 +189,9 @@ def build_grid(spans: Spans, counts: np.ndarray, arrays: dict | None = None) -> 
         k_a[plain], k_b[plain] = k[: plain.size], k[plain.size :]
     t_lo, t_hi, k_lo, k_hi = t_a.copy(), t_a.copy(), k_a.copy(), k_a.copy()
     if box.size:
-        # BOX_SAMPLES points per interval, ends included; between samples h apart a function rises
-        # above the chord between them (so above the higher sample) by at most h²/8 max|f''|
-        frac = np.linspace(0.0, 1.0, BOX_SAMPLES)
-        where = s_start[box, None] + delta[box, None] * frac[None, :]
-        where[:, -1] = s_end[box]
-        t, k, d3, d4 = (
-            d.reshape(box.size, BOX_SAMPLES, 3)
-            for d in frames_at(arrays, np.repeat(span[box], BOX_SAMPLES), where.ravel(), order=4)
+        t_a[box], k_a[box], t_b[box], k_b[box], t_lo[box], t_hi[box], k_lo[box], k_hi[box] = boxes_at(
+            arrays, span[box], s_start[box], delta[box]
         )
-        h2 = (BOX_SAFETY * (delta[box] / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
-        t_pad = np.abs(d3).max(axis=1) * h2
-        k_pad = np.abs(d4).max(axis=1) * h2
-        t_a[box], t_b[box], k_a[box], k_b[box] = t[:, 0], t[:, -1], k[:, 0], k[:, -1]
-        t_lo[box], t_hi[box] = t.min(axis=1) - t_pad, t.max(axis=1) + t_pad
-        k_lo[box], k_hi[box] = k.min(axis=1) - k_pad, k.max(axis=1) + k_pad
     return Grid(
         span=span,
         s_start=s_start,

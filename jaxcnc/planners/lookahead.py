@@ -28,9 +28,23 @@ def _compose(first: tuple[jnp.ndarray, jnp.ndarray], second: tuple[jnp.ndarray, 
 
 
 def forward_pass(b: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
-    """``x_k = min(b_k, x_{k-1} + d_k)`` with ``x_{-1} = inf``; ``b``, ``d`` of shape ``(m,)``."""
-    big, _ = jax.lax.associative_scan(_compose, (b, d))
-    return big
+    """``x_k = min(b_k, x_{k-1} + d_k)`` with ``x_{-1} = inf``; ``b``, ``d`` of shape ``(m,)``.
+
+    On a GPU the associative scan runs in O(log m) parallel depth; on a CPU a sequential scan does the
+    same work in a fraction of the time (~2 ns a step, compiled in milliseconds where the associative
+    scan takes a second to compile), so the backend decides.
+    """
+    if jax.default_backend() != "cpu":
+        big, _ = jax.lax.associative_scan(_compose, (b, d))
+        return big
+
+    def step(x_prev, row):
+        bk, dk = row
+        x = jnp.minimum(bk, x_prev + dk)
+        return x, x
+
+    _, x = jax.lax.scan(step, jnp.asarray(jnp.inf, b.dtype), (b, d))
+    return x
 
 
 def lookahead(node_cap: jnp.ndarray, delta: jnp.ndarray) -> jnp.ndarray:

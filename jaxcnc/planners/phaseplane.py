@@ -43,6 +43,9 @@ from jaxcnc.planners.lookahead import lookahead
 GU_EPS = 1e-12
 
 
+Rows = tuple[list[jnp.ndarray], list[jnp.ndarray], list[jnp.ndarray]]
+
+
 def constraint_rows(
     delta: jnp.ndarray,
     t_a: jnp.ndarray,
@@ -52,8 +55,11 @@ def constraint_rows(
     a_max: jnp.ndarray,
     cap_b: jnp.ndarray,
     box: tuple[jnp.ndarray, ...] | None = None,
-) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
-    """Rows ``gu·u + gx·x_a ≤ h`` of every interval, each ``(m, 4·n_axes + 2)``.
+) -> Rows:
+    """Rows ``gu·u + gx·x_a ≤ h`` of every interval: three lists of ``4·n_axes + 2`` vectors ``(m,)``.
+
+    Column lists rather than ``(m, R)`` matrices: every later step is elementwise over intervals, and
+    XLA fuses lists of vectors into single passes (matrices it concatenates and transposes).
 
     Args:
         delta: ``(m,)`` interval lengths (mm); t_a, k_a, t_b, k_b: ``(m, n_axes)`` ``q'`` and ``q''`` at
@@ -65,37 +71,52 @@ def constraint_rows(
             box the rows of one side share ``gx`` (``K_hi`` resp. ``-K_lo``) and differ in ``gu`` alone
             (``T`` or ``T + 2Δ K`` for ``T`` in ``{T_lo, T_hi}``), so the largest and the smallest ``gu``
             imply the other two.
+    The last two rows are ``x_b ≤ cap_b`` and ``x_b ≥ 0``.
     """
-    two_d = 2.0 * delta[:, None]
-    up = [(t_a, k_a), (t_b + two_d * k_b, k_b)]
-    lo = [(-t_a, -k_a), (-(t_b + two_d * k_b), -k_b)]
-    if box is not None:
-        boxed, t_lo, t_hi, k_lo, k_hi = box
-        b = boxed[:, None]
-        g_up = [t_lo, t_hi, t_lo + two_d * k_hi, t_hi + two_d * k_hi]
-        g_lo = [-t_lo, -t_hi, -(t_lo + two_d * k_lo), -(t_hi + two_d * k_lo)]
-        box_up = [
-            (jnp.maximum(jnp.maximum(g_up[0], g_up[1]), jnp.maximum(g_up[2], g_up[3])), k_hi),
-            (jnp.minimum(jnp.minimum(g_up[0], g_up[1]), jnp.minimum(g_up[2], g_up[3])), k_hi),
-        ]
-        box_lo = [
-            (jnp.maximum(jnp.maximum(g_lo[0], g_lo[1]), jnp.maximum(g_lo[2], g_lo[3])), -k_lo),
-            (jnp.minimum(jnp.minimum(g_lo[0], g_lo[1]), jnp.minimum(g_lo[2], g_lo[3])), -k_lo),
-        ]
-        up = [(jnp.where(b, bu, pu), jnp.where(b, bx, px)) for (pu, px), (bu, bx) in zip(up, box_up, strict=True)]
-        lo = [(jnp.where(b, bu, pu), jnp.where(b, bx, px)) for (pu, px), (bu, bx) in zip(lo, box_lo, strict=True)]
-    rows = up + lo
-    gu = [r[0] for r in rows] + [two_d, -two_d]
-    gx = [r[1] for r in rows] + [jnp.ones_like(two_d), -jnp.ones_like(two_d)]
-    h = [a_max] * len(rows) + [cap_b[:, None], jnp.zeros_like(two_d)]
-    return jnp.concatenate(gu, axis=1), jnp.concatenate(gx, axis=1), jnp.concatenate(h, axis=1)
+    two_d = 2.0 * delta
+    gu, gx, h = [], [], []
+    for i in range(t_a.shape[1]):
+        ta, ka, tb, kb = t_a[:, i], k_a[:, i], t_b[:, i], k_b[:, i]
+        end_b = tb + two_d * kb
+        rows = [(ta, ka), (end_b, kb), (-ta, -ka), (-end_b, -kb)]  # upper side at a, b; lower side at a, b
+        if box is not None:
+            boxed, t_lo, t_hi, k_lo, k_hi = (box[0],) + tuple(x[:, i] for x in box[1:])
+            g_up = (t_lo, t_hi, t_lo + two_d * k_hi, t_hi + two_d * k_hi)
+            g_lo = (-t_lo, -t_hi, -(t_lo + two_d * k_lo), -(t_hi + two_d * k_lo))
+            in_box = [
+                (_max4(g_up), k_hi),
+                (_min4(g_up), k_hi),
+                (_max4(g_lo), -k_lo),
+                (_min4(g_lo), -k_lo),
+            ]
+            rows = [
+                (jnp.where(boxed, bu, pu), jnp.where(boxed, bx, px))
+                for (pu, px), (bu, bx) in zip(rows, in_box, strict=True)
+            ]
+        for u_coef, x_coef in rows:
+            gu.append(u_coef)
+            gx.append(x_coef)
+            h.append(a_max[:, i])
+    one = jnp.ones_like(delta)
+    gu += [two_d, -two_d]
+    gx += [one, -one]
+    h += [cap_b, jnp.zeros_like(delta)]
+    return gu, gx, h
+
+
+def _max4(v: tuple[jnp.ndarray, ...]) -> jnp.ndarray:
+    return jnp.maximum(jnp.maximum(v[0], v[1]), jnp.maximum(v[2], v[3]))
+
+
+def _min4(v: tuple[jnp.ndarray, ...]) -> jnp.ndarray:
+    return jnp.minimum(jnp.minimum(v[0], v[1]), jnp.minimum(v[2], v[3]))
 
 
 def _ratio(num: jnp.ndarray, den: jnp.ndarray, ok: jnp.ndarray) -> jnp.ndarray:
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), jnp.inf)
 
 
-def static_cap(gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, cap_a: jnp.ndarray) -> jnp.ndarray:
+def static_cap(gu: list, gx: list, h: list, cap_a: jnp.ndarray) -> jnp.ndarray:
     """``(m,)`` largest ``x_a`` for which some ``u`` satisfies every row but ``x_b ≤ cap_b`` (Fourier–Motzkin).
 
     Every pair of a lower row ``j`` (``gu < 0``) and an upper row ``m`` (``gu > 0``) bounds ``x`` from
@@ -103,9 +124,8 @@ def static_cap(gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, cap_a: jnp.ndar
     ``K_b`` never exceeds ``cap_b``: an interval that must slow down towards its end is entered
     faster than its end allows.
     """
-    n_rows = gu.shape[1]
-    cols = [*range(n_rows - 2), n_rows - 1]  # the axis rows and x_b ≥ 0
-    g, x, hh = ([a[:, c] for c in cols] for a in (gu, gx, h))
+    keep = [*range(len(gu) - 2), len(gu) - 1]  # the axis rows and x_b ≥ 0
+    g, x, hh = ([a[c] for c in keep] for a in (gu, gx, h))
     up = [gi > GU_EPS for gi in g]
     lo = [gi < -GU_EPS for gi in g]
     safe = [jnp.where(up[i] | lo[i], g[i], 1.0) for i in range(len(g))]
@@ -115,8 +135,7 @@ def static_cap(gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, cap_a: jnp.ndar
     for i in range(len(g)):  # rows without u bound x alone
         flat = ~up[i] & ~lo[i] & (x[i] > 0)
         best = jnp.minimum(best, jnp.where(flat, hh[i] / jnp.where(flat, x[i], 1.0), jnp.inf))
-    # u ≤ c_m - r_m x (upper m) and u ≥ c_j - r_j x (lower j): x (r_m - r_j) ≤ c_m - c_j. The pairs are
-    # unrolled: XLA fuses them into one pass over the intervals (an (m, R, R) tensor would not be).
+    # u ≤ c_m - r_m x (upper m) and u ≥ c_j - r_j x (lower j): x (r_m - r_j) ≤ c_m - c_j
     for a in range(len(g)):
         for b in range(a + 1, len(g)):
             a_up = up[a] & lo[b]
@@ -127,75 +146,91 @@ def static_cap(gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, cap_a: jnp.ndar
     return jnp.maximum(best, 0.0)
 
 
-def backward_pieces(
-    gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, delta: jnp.ndarray
-) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Slopes and intercepts ``(m, R)``: ``K_a = min(x_static, min_j (α_j K_b + β_j))``.
+def backward_pieces(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[list, list]:
+    """Slopes and intercepts (lists of ``(m,)``): ``K_a = min(x_static, min_j (α_j K_b + β_j))``.
 
     Lower row ``j`` with the row ``x_a + 2Δ u ≤ K_b``: ``x (1/(2Δ) - gx_j/gu_j) ≤ K_b/(2Δ) - h_j/gu_j``.
     Rows that give no upper bound have ``α = 0, β = inf``.
     """
-    lo = gu < -GU_EPS
-    inv = jnp.where(delta > 0, 0.5 / jnp.where(delta > 0, delta, 1.0), 0.0)[:, None]
-    coef = inv - jnp.where(lo, gx / jnp.where(lo, gu, 1.0), 0.0)
-    use = lo & (coef > 0) & (inv > 0)
-    alpha = jnp.where(use, inv / jnp.where(use, coef, 1.0), 0.0)
-    beta = jnp.where(use, -h / jnp.where(use, gu * coef, 1.0), jnp.inf)
+    inv = jnp.where(delta > 0, 0.5 / jnp.where(delta > 0, delta, 1.0), 0.0)
+    alpha, beta = [], []
+    for g, x, hh in zip(gu[:-2], gx[:-2], h[:-2], strict=True):
+        lo = g < -GU_EPS
+        coef = inv - jnp.where(lo, x / jnp.where(lo, g, 1.0), 0.0)
+        use = lo & (coef > 0) & (inv > 0)
+        alpha.append(jnp.where(use, inv / jnp.where(use, coef, 1.0), 0.0))
+        beta.append(jnp.where(use, -hh / jnp.where(use, g * coef, 1.0), jnp.inf))
     return alpha, beta
 
 
-def backward_scan(x_static: jnp.ndarray, alpha: jnp.ndarray, beta: jnp.ndarray, x_end: jnp.ndarray) -> jnp.ndarray:
+def forward_pieces(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[list, list]:
+    """Slopes and intercepts (lists of ``(m,)``) of the forward step ``x_b = min_m (A_m x_a + B_m)``.
+
+    The largest ``u`` an upper row ``m`` allows at ``x_a`` is ``(h_m - gx_m x_a) / gu_m``, so
+    ``x_b = x_a + 2Δ u`` is affine in ``x_a``; rows that are not upper have ``A = 0, B = inf``.
+    """
+    a_list, b_list = [], []
+    for g, x, hh in zip(gu, gx, h, strict=True):
+        up = g > GU_EPS
+        inv = jnp.where(up, 2.0 * delta / jnp.where(up, g, 1.0), 0.0)
+        a_list.append(jnp.where(up, 1.0 - x * inv, 0.0))
+        b_list.append(jnp.where(up, hh * inv, jnp.inf))
+    return a_list, b_list
+
+
+def backward_scan(x_static: jnp.ndarray, alpha: list, beta: list, x_end: jnp.ndarray) -> jnp.ndarray:
     """``(m+1,)`` the controllable set's upper ends: the largest ``x`` from which the end is reachable."""
 
     def step(k_b, row):
         xs, a, b = row
-        k_a = jnp.minimum(xs, jnp.min(a * k_b + b))
+        k_a = xs
+        for aj, bj in zip(a, b, strict=True):
+            k_a = jnp.minimum(k_a, aj * k_b + bj)
         return k_a, k_a
 
     _, k = jax.lax.scan(step, x_end, (x_static, alpha, beta), reverse=True)
     return jnp.concatenate([k, x_end[None]])
 
 
-def forward_scan(gu: jnp.ndarray, gx: jnp.ndarray, h: jnp.ndarray, delta: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:
+def forward_scan(a: list, b: list, delta: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:
     """``(m+1,)`` ``x`` at the nodes: from rest, the largest admissible ``u`` on each interval."""
-    up = gu > GU_EPS
-    inv_up = jnp.where(up, 1.0 / jnp.where(up, gu, 1.0), 0.0)
 
     def step(x_a, row):
-        iu, gxr, hr, d, k_b = row
-        u = jnp.min(jnp.where(iu != 0, (hr - gxr * x_a) * iu, jnp.inf))
-        x_b = jnp.where(d > 0, x_a + 2.0 * d * jnp.minimum(u, 1e300), x_a)
+        ar, br, d, k_b = row
+        reach = jnp.inf
+        for am, bm in zip(ar, br, strict=True):
+            reach = jnp.minimum(reach, am * x_a + bm)
+        x_b = jnp.where(d > 0, reach, x_a)
         x_b = jnp.clip(x_b, 0.0, k_b)
         return x_b, x_b
 
     x0 = jnp.minimum(jnp.zeros((), k.dtype), k[0])
-    _, x = jax.lax.scan(step, x0, (inv_up, gx, h, delta, k[1:]))
+    _, x = jax.lax.scan(step, x0, (a, b, delta, k[1:]))
     return jnp.concatenate([x0[None], x])
 
 
-def line_reach(gu: jnp.ndarray, h: jnp.ndarray, delta: jnp.ndarray) -> jnp.ndarray:
+def line_reach(gu: list, h: list, delta: jnp.ndarray) -> jnp.ndarray:
     """``(m,)`` reach ``2 Δ a_t`` of intervals without curvature (``gx = 0`` on the axis rows)."""
-    up = gu > GU_EPS
-    a_t = jnp.min(_ratio(h, gu, up), axis=1)
+    a_t = jnp.full(delta.shape, jnp.inf)
+    for g, hh in zip(gu[:-2], h[:-2], strict=True):
+        a_t = jnp.minimum(a_t, _ratio(hh, g, g > GU_EPS))
     return jnp.where(delta > 0, 2.0 * delta * a_t, 0.0)
 
 
 def solve(
-    gu: jnp.ndarray,
-    gx: jnp.ndarray,
-    h: jnp.ndarray,
+    rows: Rows,
     delta: jnp.ndarray,
     cap_a: jnp.ndarray,
     x_end: jnp.ndarray,
     curved: bool,
 ) -> jnp.ndarray:
     """``(m+1,)`` time-optimal ``x`` at the nodes under the rows (``curved`` static: any ``K ≠ 0``)."""
+    gu, gx, h = rows
     if curved:
         x_static = static_cap(gu, gx, h, cap_a)
-        alpha, beta = backward_pieces(gu, gx, h, delta)
-        k = backward_scan(x_static, alpha, beta, x_end)
-        return forward_scan(gu, gx, h, delta, k)
+        k = backward_scan(x_static, *backward_pieces(gu, gx, h, delta), x_end)
+        return forward_scan(*forward_pieces(gu, gx, h, delta), delta, k)
     # Lines only (gx = 0 on the axis rows): the node caps and min(B, x + D) in both directions.
     node_cap = jnp.concatenate([cap_a, x_end[None]])
-    node_cap = node_cap.at[1:].min(h[:, -2])  # x_b ≤ cap_b
-    return lookahead(node_cap, line_reach(gu[:, :-2], h[:, :-2], delta))
+    node_cap = node_cap.at[1:].min(h[-2])  # x_b ≤ cap_b
+    return lookahead(node_cap, line_reach(gu, h, delta))

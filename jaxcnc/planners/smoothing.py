@@ -39,11 +39,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import pad_spans
-from jaxcnc.planners.buckets import bucket_size
 from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
 
 CHUNK = 1 << 16

@@ -27,9 +27,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.planners.buckets import bucket_size, pad_rows
 from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
 from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, junctions
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
@@ -117,13 +117,13 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
         cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
     delta = g["delta"]
     box = (g["boxed"], g["t_lo"], g["t_hi"], g["k_lo"], g["k_hi"])
-    gu, gx, h = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b, box)
-    x_node = solve(gu, gx, h, delta, cap_a, jnp.zeros(()), curved_any)
+    rows = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b, box)
+    x_node = solve(rows, delta, cap_a, jnp.zeros(()), curved_any)
     x0, x1 = x_node[:-1], x_node[1:]
     # Lines: a trapezoid under the span's speed cap with the axes' tangential budget.
     # Curved intervals: x linear in s between the nodes (constant s̈), as planned.
     two_d = 2.0 * jnp.where(delta > 0, delta, 1.0)
-    a_line = line_reach(gu[:, :-2], h[:, :-2], delta) / two_d
+    a_line = line_reach(rows[0], rows[2], delta) / two_d
     x_cap = jnp.where(curved, jnp.maximum(x0, x1), jnp.minimum(vcap_a, vcap_b))
     a_seg = jnp.where(curved, jnp.abs(x1 - x0) / two_d, a_line)
     prof = trapezoids(x_node, x_cap, a_seg, delta, g["dwell"])

@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.planners.buckets import bucket_size, pad_rows
 from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.registry import PlanRequest, register_planner

@@ -6,15 +6,20 @@ exact int64 arithmetic on the 2^-32-discrete fixed-point values, then scaled, so
 measurement noise is ~1e-13 mm per tick. The machine is taken to stand still before the first
 row and after the last, so a table that starts or ends moving fails. Nothing here reads the
 plan: the table and the machine file are the only inputs.
+
+The table is streamed: ``chunk_rows`` rows at a time are read with ``pread`` (:class:`TableRows`), never
+through the memory map, so checking a job of any length stays in bounded memory (tens of MB).
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from jaxcnc.errors import TableFileError
 from jaxcnc.hw.tablefile import FINE_SCALE, TableFile
 from jaxcnc.machine import MachineConfig
 
@@ -31,7 +36,7 @@ class Violation:
     first_tick: int
     last_tick: int
     axis: str
-    quantity: str  # "v", "a", "j", "pos", "table" or "pulse" (the last two: ``axis`` holds the text)
+    quantity: str  # "v", "a", "j", "pos", "path", "table" or "pulse" (the last two: ``axis`` holds the text)
     value: float  # the worst value in the run
     limit: float
 
@@ -41,6 +46,8 @@ class Violation:
         if self.quantity == "pulse":
             return f"tick {self.first_tick}: {self.axis}"
         span = f"tick {self.first_tick}" + (f" (to {self.last_tick})" if self.last_tick != self.first_tick else "")
+        if self.quantity == "path":  # ``axis`` names the program line (jaxcnc.ticks.deviation)
+            return f"{span} {self.axis}: distance from the programmed path {self.value:.6g} mm > {self.limit:.6g} mm"
         name = {"v": "|v|", "a": "|a|", "j": "|j|", "pos": "position"}[self.quantity]
         rel = ">" if self.quantity != "pos" or self.value > self.limit else "<"
         return (
@@ -61,10 +68,67 @@ class Measurement:
     violations: list[Violation] = field(default_factory=list)
     n_rows: int = 0
     pulses: Any = None  # a pulsed table's PulseCheck (jaxcnc.ticks.verify_pulses), when checked
+    path: Any = None  # the PathDeviation (jaxcnc.ticks.deviation), when the program was compared
+    path_note: str = ""  # why the path was not compared, when it was not
 
     @property
     def ok(self) -> bool:
         return not self.violations
+
+
+class TableRows:
+    """Rows of a table read on demand with ``pread``, so a table of any length is checked in bounded memory.
+
+    Slices of :attr:`TableFile.positions` are memory-mapped: every page touched stays resident in the
+    process (a 1 h table at 10 kHz maps ~0.9 GB). Here positions come from :meth:`TableFile.read_positions`
+    and the fine residuals from the same layout at ``header.fine_offset`` (``docs/table-format.md``: rows are
+    contiguous across blocks), each call into fresh arrays of only the rows asked for. The blocks' CRCs were
+    checked when the :class:`TableFile` was opened. Use as a context manager (it holds a file descriptor).
+    """
+
+    def __init__(self, table: TableFile):
+        self.table = table
+        self.header = table.header
+        self._fd: int | None = None
+
+    def __enter__(self) -> TableRows:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release the file descriptor of the fine channel."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def read(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Rows ``start:stop`` (clipped to the table): ``(positions, fine)``, ``(m, n_axes)`` int32 each;
+        ``fine`` is ``None`` when the table has no fine channel."""
+        h = self.header
+        start, stop = max(0, start), min(stop, h.n_rows)
+        pos = self.table.read_positions(start, stop)
+        if not h.has_fine:
+            return pos, None
+        if stop <= start:
+            return pos, np.zeros((0, h.n_axes), np.int32)
+        if self._fd is None:
+            self._fd = os.open(self.table.path, os.O_RDONLY)
+        row = h.n_axes * 4
+        data = os.pread(self._fd, (stop - start) * row, h.fine_offset + start * row)
+        if len(data) != (stop - start) * row:
+            raise TableFileError(f"{self.table.path}: short read of fine rows {start}-{stop - 1} (file changed?)")
+        return pos, np.frombuffer(data, dtype="<i4").reshape(stop - start, h.n_axes).astype(np.int32)
+
+    def exact_mm(self, start: int, stop: int) -> np.ndarray:
+        """Unquantised positions (discretes + fine residual) of rows ``start:stop`` in mm, ``(m, n_axes)``
+        float64 — the same values as :meth:`TableFile.exact_mm`."""
+        pos, fine = self.read(start, stop)
+        p = pos.astype(np.float64)
+        if fine is not None:
+            p = p + fine.astype(np.float64) / FINE_SCALE
+        return p * self.header.discrete_mm
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -75,11 +139,13 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1, strict=False))
 
 
-def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 18) -> Measurement:
+def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 16) -> Measurement:
     """Measure a table's per-axis |v|, |a|, |j| and travel; check them against ``machine``.
 
     Differences at row ``k`` use rows ``k-3..k`` (jerk), ``k-2..k`` (acceleration) and
     ``k-1..k`` (speed), with the first row repeated before the table and the last row after it.
+    The table is read ``chunk_rows`` rows at a time (plus a 3-row overlap); the results do not
+    depend on ``chunk_rows``. A travel violation names the first tick holding the axis' extreme.
     """
     h = table.header
     axes = h.axes
@@ -124,34 +190,43 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
     # Noise of the fine channel's rounding (half a unit per row) in the k-th difference.
     noise = {name: 2 ** (i + 1) * 0.5 * scale[name] for i, name in enumerate(_QUANTITIES)}
     maxima = {name: np.zeros(len(axes)) for name in _QUANTITIES}
-    pmin = np.full(len(axes), np.inf)
-    pmax = np.full(len(axes), -np.inf)
     n = h.n_rows
+    # travel: the extreme discretes of each axis and the first tick holding them, from the same pass
+    lo_val = np.full(len(axes), np.iinfo(np.int64).max)
+    hi_val = np.full(len(axes), np.iinfo(np.int64).min)
+    lo_tick = np.zeros(len(axes), np.int64)
+    hi_tick = np.zeros(len(axes), np.int64)
     pending: dict[tuple[str, str], list[tuple[int, int, float]]] = {}
-    for start in range(0, n + 3, chunk_rows):
-        # rows start-3 .. stop-1 of the table extended by 3 copies of its first and last rows
-        stop = min(start + chunk_rows, n + 3)
-        idx = np.clip(np.arange(start - 3, stop), 0, n - 1)
-        pos = np.asarray(table.positions[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
-        fine = (
-            np.asarray(table.fine[idx[0] : idx[-1] + 1], dtype=np.int64)[idx - idx[0]]
-            if h.has_fine
-            else np.zeros_like(pos)
-        )
-        pmin = np.minimum(pmin, pos.min(axis=0) * q)
-        pmax = np.maximum(pmax, pos.max(axis=0) * q)
-        d = np.diff(pos, axis=0) * np.int64(2**32) + np.diff(fine, axis=0)  # exact int64
-        diffs = {"v": d[2:], "a": np.diff(d, axis=0)[1:], "j": np.diff(d, n=2, axis=0)}
-        for name, dd in diffs.items():
-            val = np.abs(dd).astype(np.float64) * scale[name]  # row k = start + i
-            maxima[name] = np.maximum(maxima[name], val.max(axis=0, initial=0.0))
-            for i, a in enumerate(axes):
-                lim = limits.get(a, {}).get(name)
-                if lim is None:
-                    continue
-                bad = val[:, i] > lim * (1 + REL_SLACK) + noise[name]
-                for r0, r1 in _runs(bad):
-                    pending.setdefault((a, name), []).append((start + r0, start + r1, float(val[r0 : r1 + 1, i].max())))
+    with TableRows(table) as rows:
+        for start in range(0, n + 3, chunk_rows):
+            # rows start-3 .. stop-1 of the table extended by 3 copies of its first and last rows
+            stop = min(start + chunk_rows, n + 3)
+            idx = np.clip(np.arange(start - 3, stop), 0, n - 1)
+            first = int(idx[0])
+            raw, raw_fine = rows.read(first, int(idx[-1]) + 1)
+            pos = raw.astype(np.int64)[idx - first]
+            fine = raw_fine.astype(np.int64)[idx - first] if raw_fine is not None else np.zeros_like(pos)
+            # rows seen again (the 3-row overlap) hold no new extreme, so the strict test keeps the first tick
+            c_lo, c_hi = raw.min(axis=0), raw.max(axis=0)
+            lower, higher = c_lo < lo_val, c_hi > hi_val
+            lo_tick = np.where(lower, first + raw.argmin(axis=0), lo_tick)
+            hi_tick = np.where(higher, first + raw.argmax(axis=0), hi_tick)
+            lo_val, hi_val = np.where(lower, c_lo, lo_val), np.where(higher, c_hi, hi_val)
+            d = np.diff(pos, axis=0) * np.int64(2**32) + np.diff(fine, axis=0)  # exact int64
+            diffs = {"v": d[2:], "a": np.diff(d, axis=0)[1:], "j": np.diff(d, n=2, axis=0)}
+            for name, dd in diffs.items():
+                val = np.abs(dd).astype(np.float64) * scale[name]  # row k = start + i
+                maxima[name] = np.maximum(maxima[name], val.max(axis=0, initial=0.0))
+                for i, a in enumerate(axes):
+                    lim = limits.get(a, {}).get(name)
+                    if lim is None:
+                        continue
+                    bad = val[:, i] > lim * (1 + REL_SLACK) + noise[name]
+                    for r0, r1 in _runs(bad):
+                        pending.setdefault((a, name), []).append(
+                            (start + r0, start + r1, float(val[r0 : r1 + 1, i].max()))
+                        )
+    pmin, pmax = lo_val * q, hi_val * q
     for (a, name), runs in pending.items():
         merged: list[list] = []
         for r0, r1, v in runs:  # join runs split by chunk boundaries
@@ -167,9 +242,11 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
                 continue
             ax = machine.axis(a)
             if pmin[i] < ax.min - q / 2:
-                meas.violations.append(Violation(int(np.argmin(table.positions[:, i])), 0, a, "pos", pmin[i], ax.min))
+                t = int(lo_tick[i])
+                meas.violations.append(Violation(t, t, a, "pos", float(pmin[i]), ax.min))
             if pmax[i] > ax.max + q / 2:
-                meas.violations.append(Violation(int(np.argmax(table.positions[:, i])), 0, a, "pos", pmax[i], ax.max))
+                t = int(hi_tick[i])
+                meas.violations.append(Violation(t, t, a, "pos", float(pmax[i]), ax.max))
     for i, a in enumerate(axes):
         meas.max_abs_v[a] = float(maxima["v"][i])
         meas.max_abs_a[a] = float(maxima["a"][i])

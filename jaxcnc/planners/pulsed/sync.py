@@ -28,8 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError, SourceError
-from jaxcnc.planners.buckets import bucket_size
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.spline import cubic_coefficients, interval_extremes, spline_moments
 from jaxcnc.planners.pulsed.trajectory import Trajectory

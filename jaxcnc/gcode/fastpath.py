@@ -1,0 +1,326 @@
+"""The bulk fast path: plain motion blocks tokenised and interpreted with NumPy, a run at a time.
+
+A *plain* block is one whose words are all among
+
+    G0 G1 G2 G3   X Y Z   I J K R   F   S   N
+
+with literal numbers (any spelling the lexer reads: ``G01``, ``g1``, ``G1.0``, ``X-.5``, ``x 1 0``), spaces
+and tabs anywhere, and the comments the dialect has (``( ... )`` closed on its line, ``;`` to the end of
+the line). A blank or comment-only line is plain too (it holds no block). Every other line — any other
+word, parameters, expressions, O-words, block delete, ``%``, anything malformed, a letter given twice, a
+negative F or S, an N that is not a non-negative integer, a number that overflows — is *complex* and goes
+through the line-by-line interpreter, which stays the reference implementation.
+
+:func:`plain_table` reads the whole program at once: comments and blanks removed with one regular
+expression pass each, the plain lines recognised by one more, every number converted in one NumPy call,
+each word put in a ``(blocks, 11)`` table of values and one of presence. :func:`interpret_run` then
+executes a run of consecutive plain blocks from the modal state the interpreter has at its start: motion
+mode, feed and power forward-filled, positions forward-filled per axis (absolute) or summed in sequence
+(incremental), arc centres from I/J/K or R with LinuxCNC's radius tolerance and centre correction, full
+circles and helices — every value computed with the same floating-point operations, in the same order,
+as :class:`~jaxcnc.gcode.interpreter._Interpreter` does, so the rows are bit for bit the same. A run in
+which some block would raise an error (or reach a non-finite number) is executed only up to that block;
+the interpreter then runs the block itself and raises the located error it always raised.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from jaxcnc.program import Kind
+
+#: The letters a plain block may hold, in the column order of :attr:`PlainTable.values`.
+PLAIN_LETTERS = "GXYZIJKRFSN"
+_G, _X, _Y, _Z, _I, _J, _K, _R, _F, _S, _N = range(len(PLAIN_LETTERS))
+#: Runs of fewer plain blocks than this are left to the line-by-line interpreter (the vectorised
+#: interpretation of a run has a fixed cost of some tens of microseconds).
+MIN_RUN = 4
+
+_WORD = r"[GXYZIJKRFSN][+-]?(?:\d+\.?\d*|\.\d+)"  # the lexer's number syntax
+_PLAIN_LINE = re.compile(rf"^(?:{_WORD})*$", re.MULTILINE)
+_COMMENTS = {
+    (True, True): re.compile(r"\([^)\n]*\)|;[^\n]*"),
+    (True, False): re.compile(r"\([^)\n]*\)"),
+    (False, True): re.compile(r";[^\n]*"),
+    (False, False): None,
+}
+_NON_ASCII = re.compile(r"[^\x00-\x7f]")
+_COLUMN = np.full(256, -1, dtype=np.int64)
+for _k, _c in enumerate(PLAIN_LETTERS):
+    _COLUMN[ord(_c)] = _k
+_LETTERS_TO_SPACE = bytes(32 if (65 <= c <= 90 or c == 10) else c for c in range(256))
+
+
+@dataclass(frozen=True)
+class PlainTable:
+    """The words of every plain block of a program (rows: blocks; columns: :data:`PLAIN_LETTERS`).
+
+    Attributes:
+        plain: ``(n,)`` bool, the block is plain.
+        values: ``(n, 11)`` float64, each word's number (NaN where the block lacks the letter).
+        present: ``(n, 11)`` bool, the block has the letter.
+        complex_index: sorted indices of the blocks that are not plain, then ``n``.
+    """
+
+    plain: np.ndarray
+    values: np.ndarray
+    present: np.ndarray
+    complex_index: np.ndarray
+
+    def run_end(self, i: int) -> int:
+        """The first block at or after ``i`` that is not plain (``n`` when none is)."""
+        return int(self.complex_index[np.searchsorted(self.complex_index, i)])
+
+
+def plain_table(texts: list[str], paren_comments: bool = True, semicolon_comments: bool = True) -> PlainTable:
+    """Recognise and tokenise the plain blocks among ``texts`` (one block per entry, no line breaks).
+
+    ``paren_comments`` / ``semicolon_comments``: the comment styles of the dialect; a comment style it
+    lacks leaves its character in the line, which then is not plain.
+    """
+    n = len(texts)
+    body = "\n".join(texts)
+    comments = _COMMENTS[(paren_comments, semicolon_comments)]
+    if comments is not None and ("(" in body or ";" in body):
+        body = comments.sub("", body)  # left to right, as the lexer reads them
+    body = body.replace(" ", "").replace("\t", "")  # the only blanks a line can hold
+    if not body.isascii():  # upper() could turn a non-ASCII letter into an ASCII one
+        body = _NON_ASCII.sub("#", body)
+    up = body.upper()
+    # What the plain lines leave behind is the text of the other lines: those are complex.
+    rest = np.frombuffer(_PLAIN_LINE.sub("", up).encode("ascii"), dtype=np.uint8)
+    newline = rest == 10
+    complex_lines = np.unique(np.cumsum(newline)[~newline])
+    buf = np.frombuffer(up.encode("ascii"), dtype=np.uint8).copy()
+    breaks = np.flatnonzero(buf == 10)
+    if complex_lines.size:  # blank the complex lines so that only plain words are read below
+        first = np.concatenate(([0], breaks + 1))[complex_lines]
+        stop = np.concatenate((breaks, [buf.size]))[complex_lines]
+        edges = np.zeros(buf.size + 1, dtype=np.int64)
+        np.add.at(edges, first, 1)
+        np.add.at(edges, stop, -1)
+        buf[np.cumsum(edges[:-1]) > 0] = 32
+    letters = np.flatnonzero(buf >= 65)  # only word letters are >= 'A' in plain lines
+    numbers = (
+        np.fromstring(buf.tobytes().translate(_LETTERS_TO_SPACE), dtype=np.float64, sep=" ")
+        if letters.size
+        else np.zeros(0)  # (fromstring reads blanks alone as [-1.0])
+    )
+    if numbers.size != letters.size:  # pragma: no cover - the plain-line expression guarantees it
+        raise AssertionError("plain words and numbers do not pair up")
+    line = np.searchsorted(breaks, letters)
+    col = _COLUMN[buf[letters]]
+    plain = np.ones(n, dtype=bool)
+    plain[complex_lines] = False
+    # Words the line-by-line interpreter refuses or treats otherwise: the block is complex.
+    g = col == _G
+    odd = ~np.isfinite(numbers)
+    odd |= g & (numbers != 0) & (numbers != 1) & (numbers != 2) & (numbers != 3)
+    odd |= (col == _N) & ((numbers < 0) | (numbers != np.trunc(numbers)))
+    odd |= ((col == _F) | (col == _S)) & (numbers < 0)
+    plain[line[odd]] = False
+    key = line * len(PLAIN_LETTERS) + col
+    twice = np.bincount(key, minlength=n * len(PLAIN_LETTERS)) > 1
+    plain[np.flatnonzero(twice) // len(PLAIN_LETTERS)] = False
+    values = np.full((n, len(PLAIN_LETTERS)), np.nan)
+    present = np.zeros((n, len(PLAIN_LETTERS)), dtype=bool)
+    values[line, col] = numbers
+    present[line, col] = True
+    values[~plain] = np.nan
+    present[~plain] = False
+    return PlainTable(plain, values, present, np.append(np.flatnonzero(~plain), n))
+
+
+@dataclass
+class RunState:
+    """The modal state a run of plain blocks starts from (read from the interpreter)."""
+
+    pos: np.ndarray  # (3,) mm
+    scale: float  # mm per program unit
+    absolute: bool
+    arc_absolute: bool
+    offset: np.ndarray  # (3,) program -> machine (G92), mm
+    motion: int | None  # tenths: 0, 10, 20, 30
+    feed_raw: float | None
+    power: float
+    laser: int
+    plane: int
+    plane_axes: tuple[int, int, int]
+    exact_stop: bool
+    blend_tol: float
+    pending_stop: bool
+    arc_tol: float  # radius tolerance, mm
+
+
+@dataclass
+class RunResult:
+    """What a run did: ``blocks`` blocks executed (all of the run unless one needs the interpreter)."""
+
+    blocks: int
+    nonfinite: bool = False  # the next block reaches a non-finite number (the interpreter takes over)
+    columns: dict[str, np.ndarray] | None = None  # the rows, one array per Program column
+    pos: np.ndarray | None = None
+    motion: int | None = None
+    feed_raw: float | None = None
+    power: float = 0.0
+    any_words: bool = False
+
+
+def _fill(mask: np.ndarray, values: np.ndarray, initial: float) -> np.ndarray:
+    """``values`` where ``mask``, else the last such value before (``initial`` before the first)."""
+    idx = np.maximum.accumulate(np.where(mask, np.arange(mask.size), -1))
+    return np.where(idx >= 0, values[np.maximum(idx, 0)], initial)
+
+
+def interpret_run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> RunResult:
+    """Execute the plain blocks ``a:b`` of ``table`` (source lines ``lines[a:b]``) from state ``st``.
+
+    Returns the rows and the state after the run, or — when a block would raise an error or reach a
+    non-finite number — those of the blocks before it, with ``blocks`` the count of blocks executed.
+    """
+    flagged, nonfinite, result = _run(table, a, b, lines, st)
+    if flagged < 0:
+        return result
+    if flagged == 0:
+        return RunResult(0, nonfinite)
+    prefix = _run(table, a, a + flagged, lines, st)[2]  # every value is causal: the prefix is unchanged
+    prefix.nonfinite = nonfinite
+    return prefix
+
+
+def _run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> tuple[int, bool, RunResult]:
+    """(first flagged block or -1, whether it is flagged for a non-finite number, the run's result)."""
+    V, P = table.values[a:b], table.present[a:b]
+    n = b - a
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        g = P[:, _G]
+        motion = _fill(g, np.where(g, V[:, _G], 0.0) * 10, -1.0 if st.motion is None else st.motion).astype(np.int64)
+        feed_raw = _fill(P[:, _F], V[:, _F], np.nan if st.feed_raw is None else st.feed_raw)
+        power = _fill(P[:, _S], V[:, _S], st.power)
+        axes = P[:, _X] | P[:, _Y] | P[:, _Z]
+        rows = np.flatnonzero(axes)
+        rm = motion[rows]
+        arc_row = rm >= 20
+        arc_line = np.zeros(n, dtype=bool)
+        arc_line[rows[arc_row]] = True
+        # errors the interpreter raises for such blocks
+        bad = axes & (motion < 0)  # axis words with no motion mode
+        bad |= g & ~axes & (motion >= 20)  # an arc without end point words
+        bad |= (P[:, _I] | P[:, _J] | P[:, _K] | P[:, _R]) & ~arc_line  # I J K R with no meaning
+        bad |= axes & (motion >= 10) & (feed_raw == 0)  # feed rate zero
+        # end points: absolute values, or the increments summed in sequence from the start point
+        m = rows.size
+        end = np.empty((m, 3))
+        for k in range(3):
+            have = P[rows, _X + k]
+            v = V[rows, _X + k][have] * st.scale
+            if st.absolute:
+                v = v + st.offset[k]
+            seq = np.concatenate(([st.pos[k]], v))
+            if not st.absolute:
+                seq = np.cumsum(seq)  # sequential: ((p + d1) + d2) + ...
+            end[:, k] = seq[np.cumsum(have)]
+        start = np.concatenate((st.pos[None, :], end[:-1]))
+        center = np.full((m, 3), np.nan)
+        turn = np.zeros(m, dtype=np.int8)
+        arcs = np.flatnonzero(arc_row)
+        if arcs.size:
+            arc_bad, centers = _arcs(V, P, rows[arcs], start[arcs], end[arcs], rm[arcs] == 20, st)
+            bad[rows[arcs][arc_bad]] = True
+            center[arcs] = centers
+            turn[arcs] = np.where(rm[arcs] == 20, -1, 1)
+        odd = np.zeros(n, dtype=bool)
+        odd[rows[~np.isfinite(end).all(axis=1)]] = True
+        odd[rows[arcs][~np.isfinite(center[arcs]).all(axis=1)]] = True
+        flagged = bad | odd
+        if flagged.any():
+            k = int(np.argmax(flagged))
+            return k, bool(odd[k]), RunResult(0)
+        fr = feed_raw[rows]
+        feed = np.where((rm == 0) | np.isnan(fr), np.nan, fr * st.scale / 60.0)
+    stop = np.full(m, st.exact_stop)
+    if m:
+        stop[0] = st.pending_stop or st.exact_stop
+    columns = {
+        "kind": np.where(arc_row, int(Kind.ARC), int(Kind.LINE)).astype(np.int8),
+        "start": start,
+        "end": end,
+        "center": center,
+        "turn": turn,
+        "feed": feed,
+        "rapid": rm == 0,
+        "laser": np.full(m, st.laser, dtype=np.int8),
+        "power": power[rows],
+        "dwell_s": np.zeros(m),
+        "stop_before": stop,
+        "blend_tol": np.full(m, 0.0 if st.exact_stop else st.blend_tol),
+        "event": np.zeros(m, dtype=np.int8),
+        "event_value": np.zeros(m, dtype=np.int32),
+        "line": np.asarray(lines[a:b], dtype=np.int64)[rows],
+        "curve": np.full(m, -1, dtype=np.int32),
+        "plane": np.full(m, st.plane, dtype=np.int8),
+    }
+    last_motion = int(motion[-1]) if n else (-1 if st.motion is None else st.motion)
+    last_feed = float(feed_raw[-1]) if n else np.nan
+    return (
+        -1,
+        False,
+        RunResult(
+            blocks=n,
+            columns=columns,
+            pos=end[-1].copy() if m else st.pos.copy(),
+            motion=None if last_motion < 0 else last_motion,
+            feed_raw=None if np.isnan(last_feed) else last_feed,
+            power=float(power[-1]) if n else st.power,
+            any_words=bool(P.any()),
+        ),
+    )
+
+
+def _arcs(
+    V: np.ndarray, P: np.ndarray, lines: np.ndarray, start: np.ndarray, end: np.ndarray, cw: np.ndarray, st: RunState
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of the arc rows (lines ``lines`` of the run) and which of them the interpreter refuses.
+
+    The operations are those of ``_Interpreter.arc``, element by element.
+    """
+    a0, a1, a2 = st.plane_axes
+    ci, cj, cn = _I + a0, _I + a1, _I + a2  # I/J/K letters of the plane's first, second and normal axis
+    has_i, has_j, has_n, has_r = P[lines, ci], P[lines, cj], P[lines, cn], P[lines, _R]
+    vi, vj, vr = V[lines, ci], V[lines, cj], V[lines, _R]
+    sx, sy, ex, ey = start[:, a0], start[:, a1], end[:, a0], end[:, a1]
+    bad = has_n | (has_r & (has_i | has_j))
+    chord_x, chord_y = ex - sx, ey - sy
+    d = np.hypot(chord_x, chord_y)
+    mid_x, mid_y = (sx + ex) / 2, (sy + ey) / 2
+    left_x, left_y = -chord_y / d, chord_x / d  # unit normal to the left of the chord
+    # R form: the centre on the bisector, on the side the arc turns towards (R < 0: the other side)
+    radius = np.abs(vr) * st.scale
+    half = d / 2
+    h2 = radius * radius - half * half
+    h = np.sqrt(np.where(0.0 > h2, 0.0, h2))  # max(h2, 0.0)
+    side_h = np.where(cw, -1.0, 1.0) * np.where(vr > 0, 1.0, -1.0) * h
+    r_x, r_y = mid_x + side_h * left_x, mid_y + side_h * left_y
+    bad |= has_r & ((d < 1e-9) | (radius == 0) | (half > radius + st.arc_tol))
+    # I J K form: the centre given, checked against both radii, moved onto the bisector
+    if st.arc_absolute:
+        c_x = np.where(has_i, vi * st.scale + st.offset[a0], sx)
+        c_y = np.where(has_j, vj * st.scale + st.offset[a1], sy)
+    else:
+        c_x = sx + np.where(has_i, vi, 0.0) * st.scale
+        c_y = sy + np.where(has_j, vj, 0.0) * st.scale
+    r1 = np.hypot(sx - c_x, sy - c_y)
+    r2 = np.hypot(ex - c_x, ey - c_y)
+    bad |= ~has_r & (~(has_i | has_j) | (r1 < 1e-9) | (np.abs(r1 - r2) > st.arc_tol))
+    t = (c_x - mid_x) * left_x + (c_y - mid_y) * left_y
+    moved = d > 1e-9
+    c_x = np.where(moved, mid_x + t * left_x, c_x)
+    c_y = np.where(moved, mid_y + t * left_y, c_y)
+    center = np.empty((lines.size, 3))
+    center[:, a0] = np.where(has_r, r_x, c_x)
+    center[:, a1] = np.where(has_r, r_y, c_y)
+    center[:, a2] = start[:, a2]
+    return bad, center

@@ -1,0 +1,578 @@
+"""Independent check of the path: how far every tick of a table lies from the *programmed* geometry.
+
+The planner may replace a corner between two motion rows by a curve within the blend tolerance the
+program allows there; everywhere else the table should follow the programmed lines, arcs and splines.
+This module measures that on the table itself, with nothing from the planner: the inputs are the table
+(exact positions = integer discretes + fine residual, streamed in chunks), the machine file (axis names,
+``path.corner_tol_mm``) and the :class:`~jaxcnc.program.Program` the table was planned from. It imports
+neither :mod:`jaxcnc.geometry` nor :mod:`jaxcnc.planners` (nor JAX): lines, arcs and helices are measured
+in closed form here, splines with ``scipy.interpolate.BSpline``.
+
+What is compared with what, tick by tick:
+
+* **Which row runs.** The table's ``BLOCK`` events (``aux`` = source line, ``value`` = program row) say
+  which program row runs from which tick; tick ``k`` belongs to the row of the last ``BLOCK`` event at or
+  before ``k`` (ticks before the first event: the first event's row).
+* **Geometry compared.** A blended corner spans the end of one motion row and the start of the next, so
+  the tick is compared with its own row ``r`` and with the nearest *moving* rows before and after it,
+  ``P`` and ``N`` (moving: a line of non-zero length, an arc or a spline; dwells, events and zero-length
+  moves are skipped). The distance is the smallest of the three distances. Rows that do not move (dwell,
+  event, zero-length line) are the point where they stand.
+* **Tolerance allowed.** The tolerance of the junction between consecutive moving rows ``a < b`` is that
+  of the row after it: ``blend_tol[b]`` (G64 P), the machine's ``corner_tol_mm`` where it is ``inf``
+  (G64 without P), and 0 — an exact corner — where any row in ``a+1 .. b`` must start at rest
+  (``stop_before``: G61.1, the laser switched, a dwell, an event) or where there is no row on one side.
+  A tick of a moving row ``r`` may lie up to ``max(J(P, r), J(r, N))`` from the geometry; a tick of a row
+  that does not move up to ``J(P, N)``. On top of that a numeric slack of :data:`SLACK_MM` (1e-6 mm).
+  G61 (exact path) therefore allows 1e-6 mm everywhere.
+* **Distances.** Line segments: closed form. Circular arcs (G17/G18/G19, ``turn`` +1 counter-clockwise
+  seen from the plane normal, a full circle where end = start in the plane): exact — the nearest point is
+  at the query's angle when that lies in the sweep, else the nearer end. Helices (the normal coordinate
+  rises linearly with the angle): the smallest distance over 32 samples per turn refined by Newton's
+  method; every candidate is a point of the helix, so the figure is never below the true distance (an
+  upper bound, exact where Newton converged — to ~1e-12 mm in practice). Splines (clamped NURBS): the
+  homogeneous control points ``(w·P, w)`` evaluated with ``scipy.interpolate.BSpline``, sampled densely
+  (one sample per :data:`CURVE_SPACING_MM` of control polygon, at least 8 per knot span), the nearest
+  sample found with a k-d tree and refined by Newton projection on the curve; again every candidate is a
+  curve point, so the distance reported is an upper bound of the true one (a check that passes is sound).
+
+Reported besides the maximum: the largest deviation **away from corners** — at ticks farther from every
+blendable corner point of the rows compared than ``16·J / (3·sin(θ/2))`` (``θ`` the programmed turn at
+the corner, ``J`` its tolerance; twice the reach of a line–line blend that uses the whole tolerance;
+junctions turning by less than :data:`CORNER_MIN_TURN_RAD` are tangent joins, no corners). There the
+table should follow the program to numerical precision; the figure is information, not part of the
+verdict.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from jaxcnc.errors import JaxcncError
+from jaxcnc.hw.tablefile import EventKind, TableFile, file_sha256
+from jaxcnc.machine import MachineConfig
+from jaxcnc.program import PROGRAM_AXES, Kind, Program
+from jaxcnc.ticks.verify import TableRows, Violation, _runs
+
+#: Numeric slack added to every tolerance (mm): far above the table's fixed point (2^-32 discrete) and
+#: float rounding, far below any tolerance a program states.
+SLACK_MM = 1e-6
+#: A tick this close to its own row (mm) is not compared with the neighbouring rows (it cannot matter).
+ON_PATH_MM = 1e-9
+#: Spline sampling: about one sample per this much control-polygon length (mm).
+CURVE_SPACING_MM = 0.05
+#: At most this many samples per spline (the spacing grows for longer ones).
+CURVE_MAX_SAMPLES = 1 << 20
+#: Ticks per chunk read from the table.
+CHUNK_ROWS = 1 << 16
+#: Program axes (first, second, normal) of each arc plane, as RS274NGC defines them (G18 is Z-X).
+PLANE_AXES = {17: (0, 1, 2), 18: (2, 0, 1), 19: (1, 2, 0)}
+#: In-plane chord (mm) below which an arc's end equals its start: a full circle (as the G-code reader).
+FULL_CIRCLE_MM = 1e-9
+#: Junctions turning less than this are no corners for the "away from corners" figure (tangent joins).
+CORNER_MIN_TURN_RAD = 1e-6
+#: Newton steps refining the nearest point on a helix or spline.
+NEWTON_STEPS = 8
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass
+class PathDeviation:
+    """Distances of a table's ticks from the programmed path (module docstring for the definition)."""
+
+    n_ticks: int
+    max_mm: float  # the largest distance of a tick from the programmed geometry
+    worst_tick: int
+    worst_row: int  # program row running at the worst tick
+    worst_line: int  # its source line
+    allowed_at_worst_mm: float  # tolerance + slack allowed at the worst tick
+    n_over: int  # ticks farther than allowed
+    max_away_mm: float  # the largest distance at ticks away from blendable corners (nan: none there)
+    n_away: int  # how many ticks are away from corners
+    max_tol_mm: float  # the largest tolerance any tick was allowed (without the slack)
+    slack_mm: float
+    violations: list[Violation] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.n_over == 0
+
+
+# ----------------------------------------------------------------------------------------------
+# Distances from points to programmed geometry (vectorised over points)
+
+
+def segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from points ``p`` ``(m, 3)`` to segments ``a``–``b`` (``(m, 3)`` or ``(3,)``); a point when
+    ``a == b``."""
+    ab = b - a
+    den = np.sum(ab * ab, axis=-1)
+    t = np.clip(np.sum((p - a) * ab, axis=-1) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+
+@dataclass(frozen=True)
+class Arcs:
+    """Arcs and helices in their plane's coordinates ``(u, v, w)`` = program columns ``perm``.
+
+    Every array has one entry per arc: ``perm`` ``(k, 3)`` (first, second, normal axis), ``cu, cv`` the
+    centre in the plane, ``radius``, ``phi0`` the start angle, ``sweep`` the signed angle travelled
+    (``+`` counter-clockwise), ``w0`` the start's normal coordinate and ``rise`` the normal travel,
+    ``start``/``end`` ``(k, 3)`` in program coordinates.
+    """
+
+    perm: np.ndarray
+    cu: np.ndarray
+    cv: np.ndarray
+    radius: np.ndarray
+    phi0: np.ndarray
+    sweep: np.ndarray
+    w0: np.ndarray
+    rise: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+
+    def take(self, idx: np.ndarray) -> Arcs:
+        """The arcs ``idx`` (one per point, for :func:`arc_distance`)."""
+        return Arcs(*(getattr(self, f)[idx] for f in self.__dataclass_fields__))
+
+    def tangents(self) -> tuple[np.ndarray, np.ndarray]:
+        """Unit directions of travel ``(k, 3)`` at the start and at the end of each arc."""
+        out = []
+        for phi in (self.phi0, self.phi0 + self.sweep):
+            s = np.sign(self.sweep)
+            dwdphi = self.rise / np.where(self.sweep != 0, np.abs(self.sweep), 1.0)
+            t_uvw = np.stack([-self.radius * np.sin(phi) * s, self.radius * np.cos(phi) * s, dwdphi], axis=1)
+            t = np.empty_like(t_uvw)
+            np.put_along_axis(t, self.perm, t_uvw, axis=1)
+            out.append(t / np.linalg.norm(t, axis=1, keepdims=True))
+        return out[0], out[1]
+
+
+def make_arcs(start: np.ndarray, end: np.ndarray, center: np.ndarray, turn: np.ndarray, plane: np.ndarray) -> Arcs:
+    """Arcs of program rows: ``start, end, center`` ``(k, 3)``, ``turn`` ±1, ``plane`` 17/18/19."""
+    start, end, center = (np.atleast_2d(np.asarray(x, np.float64)) for x in (start, end, center))
+    turn = np.atleast_1d(np.asarray(turn, np.float64))
+    plane = np.atleast_1d(np.asarray(plane))
+    perm = np.array([PLANE_AXES[int(g)] for g in plane], dtype=np.int64).reshape(-1, 3)
+    s = np.take_along_axis(start, perm, axis=1)
+    e = np.take_along_axis(end, perm, axis=1)
+    c = np.take_along_axis(center, perm, axis=1)
+    phi0 = np.arctan2(s[:, 1] - c[:, 1], s[:, 0] - c[:, 0])
+    phi1 = np.arctan2(e[:, 1] - c[:, 1], e[:, 0] - c[:, 0])
+    full = np.hypot(e[:, 0] - s[:, 0], e[:, 1] - s[:, 1]) < FULL_CIRCLE_MM
+    sweep = np.where(full, _TWO_PI, np.mod(turn * (phi1 - phi0), _TWO_PI)) * turn
+    return Arcs(
+        perm=perm,
+        cu=c[:, 0],
+        cv=c[:, 1],
+        radius=np.hypot(s[:, 0] - c[:, 0], s[:, 1] - c[:, 1]),
+        phi0=phi0,
+        sweep=sweep,
+        w0=s[:, 2],
+        rise=e[:, 2] - s[:, 2],
+        start=start,
+        end=end,
+    )
+
+
+def arc_distance(p: np.ndarray, arcs: Arcs) -> np.ndarray:
+    """Distance from points ``p`` ``(m, 3)`` to arcs ``arcs`` (one per point, see :meth:`Arcs.take`).
+
+    Planar arcs: exact. Helices: an upper bound that is exact where the refinement converged (the
+    distance to a point of the helix; module docstring).
+    """
+    p = np.asarray(p, np.float64)
+    q = np.take_along_axis(p, arcs.perm, axis=1)
+    u, v, w = q[:, 0] - arcs.cu, q[:, 1] - arcs.cv, q[:, 2] - arcs.w0
+    rho = np.hypot(u, v)
+    sgn = np.where(arcs.sweep < 0, -1.0, 1.0)
+    span = np.abs(arcs.sweep)
+    t0 = np.mod(sgn * (np.arctan2(v, u) - arcs.phi0), _TWO_PI)  # the query's angle from the start, travelled
+    ends = np.minimum(np.linalg.norm(p - arcs.start, axis=1), np.linalg.norm(p - arcs.end, axis=1))
+    out = np.where(t0 <= span, np.hypot(rho - arcs.radius, w), ends)
+    helix = np.flatnonzero(arcs.rise != 0)
+    if helix.size:
+        h = helix
+        out[h] = _helix_distance(rho[h], t0[h], w[h], arcs.radius[h], span[h], arcs.rise[h])
+    return out
+
+
+def _helix_distance(
+    rho: np.ndarray, t0: np.ndarray, w: np.ndarray, radius: np.ndarray, span: np.ndarray, rise: np.ndarray
+) -> np.ndarray:
+    """Distance to helices ``θ ↦ (R cos θ, R sin θ, rise·θ/span)``, ``θ ∈ [0, span]``, from points at angle
+    ``t0``, radius ``rho`` and height ``w`` (all relative to the helix start): the minimum of the squared
+    distance ``f(θ) = ρ² + R² − 2ρR cos(θ − t0) + (w − κθ)²`` over samples and Newton refinements."""
+    kappa = rise / span
+
+    def f(th: np.ndarray) -> np.ndarray:
+        return (
+            rho[:, None] ** 2
+            + radius[:, None] ** 2
+            - 2 * rho[:, None] * radius[:, None] * np.cos(th - t0[:, None])
+            + (w[:, None] - kappa[:, None] * th) ** 2
+        )
+
+    n = 32 * max(1, int(np.ceil(np.max(span) / _TWO_PI))) + 1
+    th = span[:, None] * np.linspace(0.0, 1.0, n)[None, :]
+    # candidates: the samples, the height match and the in-plane matches t0 + 2πn near it
+    th_h = np.clip(w / kappa, 0.0, span)
+    n_h = np.floor((th_h - t0) / _TWO_PI)
+    extra = np.stack([th_h, t0 + n_h * _TWO_PI, t0 + (n_h + 1) * _TWO_PI], axis=1)
+    th = np.concatenate([th, np.clip(extra, 0.0, span[:, None])], axis=1)
+    fv = f(th)
+    best = fv.min(axis=1)
+    starts = np.stack([th[np.arange(th.shape[0]), np.argmin(fv[:, :n], axis=1)], *extra.T], axis=1)
+    x = np.clip(starts, 0.0, span[:, None])
+    a = (rho * radius)[:, None]
+    for _ in range(NEWTON_STEPS):
+        d1 = 2 * a * np.sin(x - t0[:, None]) - 2 * kappa[:, None] * (w[:, None] - kappa[:, None] * x)
+        d2 = 2 * a * np.cos(x - t0[:, None]) + 2 * kappa[:, None] ** 2
+        x = np.clip(x - np.where(d2 > 0, d1 / np.where(d2 > 0, d2, 1.0), 0.0), 0.0, span[:, None])
+        best = np.minimum(best, f(x).min(axis=1))
+    return np.sqrt(np.maximum(best, 0.0))
+
+
+def point_arc_distance(
+    p: np.ndarray, start: np.ndarray, end: np.ndarray, center: np.ndarray, turn: int, plane: int = 17
+) -> np.ndarray:
+    """Distance from points ``p`` ``(m, 3)`` to one arc or helix given as a program row would give it."""
+    p = np.atleast_2d(np.asarray(p, np.float64))
+    arcs = make_arcs(start, end, center, turn, plane)
+    return arc_distance(p, arcs.take(np.zeros(p.shape[0], np.int64)))
+
+
+class CurveDistance:
+    """Distances from points to one clamped (rational) B-spline, independent of jaxcnc's Bézier code.
+
+    ``scipy.interpolate.BSpline`` evaluates the homogeneous curve ``(w·P, w)``; dense samples (one per
+    ``spacing_mm`` of control polygon, at least 8 per knot span) give each point a start, Newton projection
+    on the curve refines it. Every distance returned is to a point of the curve (an upper bound of the true
+    distance, exact where the nearest sample lay in the basin of the nearest point).
+    """
+
+    def __init__(
+        self,
+        degree: int,
+        points: np.ndarray,
+        weights: np.ndarray,
+        knots: np.ndarray,
+        spacing_mm: float = CURVE_SPACING_MM,
+        max_samples: int = CURVE_MAX_SAMPLES,
+    ):
+        from scipy.interpolate import BSpline
+        from scipy.spatial import cKDTree
+
+        points = np.asarray(points, np.float64)
+        weights = np.asarray(weights, np.float64)
+        knots = np.asarray(knots, np.float64)
+        self.degree = p = int(degree)
+        hom = np.concatenate([points * weights[:, None], weights[:, None]], axis=1)
+        self._h = [BSpline(knots, hom, p)]
+        for k in (1, 2):
+            self._h.append(self._h[-1].derivative() if p >= k else None)
+        self.u0, self.u1 = float(knots[p]), float(knots[-p - 1])
+        # samples: per non-empty knot span, by the length of its control polygon
+        m = points.shape[0]
+        i = np.arange(p, m)
+        i = i[knots[i + 1] > knots[i]]
+        seg = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+        poly_len = seg[i] - seg[i - p]
+        spacing = max(spacing_mm, float(np.sum(poly_len)) / max_samples)
+        count = np.maximum(8, np.ceil(poly_len / spacing)).astype(np.int64)
+        first = np.repeat(np.cumsum(count) - count, count)
+        frac = (np.arange(int(count.sum())) - first) / np.repeat(count, count)
+        u = np.repeat(knots[i], count) + frac * np.repeat(knots[i + 1] - knots[i], count)
+        self.u = np.append(u, self.u1)
+        self.samples = self.eval(self.u)[0]
+        self._tree = cKDTree(self.samples)
+
+    def eval(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, first and second derivative ``(m, 3)`` of the curve at parameters ``u``."""
+        u = np.clip(np.asarray(u, np.float64), self.u0, self.u1)
+        h, h1, h2 = (np.zeros((u.size, 4)) if f is None else f(u) for f in self._h)
+        w, w1, w2 = h[:, 3:], h1[:, 3:], h2[:, 3:]
+        c = h[:, :3] / w
+        c1 = (h1[:, :3] - c * w1) / w
+        c2 = (h2[:, :3] - 2 * c1 * w1 - c * w2) / w
+        return c, c1, c2
+
+    def end_tangents(self) -> tuple[np.ndarray, np.ndarray]:
+        """Unit directions of travel ``(3,)`` at the start and at the end."""
+        _, d1, _ = self.eval(np.array([self.u0, self.u1]))
+        n = np.linalg.norm(d1, axis=1, keepdims=True)
+        d1 = d1 / np.where(n > 0, n, 1.0)
+        return d1[0], d1[1]
+
+    def distance(self, p: np.ndarray) -> np.ndarray:
+        """Distance from points ``p`` ``(m, 3)`` to the curve (an upper bound, see the class)."""
+        p = np.atleast_2d(np.asarray(p, np.float64))
+        d, k = self._tree.query(p)
+        best = d**2
+        u = self.u[k]
+        todo = np.arange(p.shape[0])
+        for _ in range(NEWTON_STEPS):
+            c, c1, c2 = self.eval(u[todo])
+            r = c - p[todo]
+            best[todo] = np.minimum(best[todo], np.einsum("ij,ij->i", r, r))
+            g = np.einsum("ij,ij->i", r, c1)
+            speed2 = np.einsum("ij,ij->i", c1, c1)
+            dg = speed2 + np.einsum("ij,ij->i", r, c2)
+            step = g / np.where(dg > 0, dg, np.maximum(speed2, 1e-300))
+            u_new = np.clip(u[todo] - step, self.u0, self.u1)
+            moved = np.abs(u_new - u[todo]) > 1e-15 * max(1.0, abs(self.u1))
+            u[todo] = u_new
+            todo = todo[moved]
+            if todo.size == 0:
+                break
+        if todo.size:
+            c = self.eval(u[todo])[0]
+            best[todo] = np.minimum(best[todo], np.einsum("ij,ij->i", c - p[todo], c - p[todo]))
+        return np.sqrt(best)
+
+
+# ----------------------------------------------------------------------------------------------
+# The program's rows: what each tick is compared with, and what it is allowed
+
+
+class ProgramPath:
+    """The programmed geometry of a Program's rows, with the rows and tolerance each row's ticks get."""
+
+    def __init__(self, program: Program, corner_tol_mm: float):
+        self.program = pr = program
+        n = len(pr)
+        kind = pr.kind
+        self.is_arc = kind == Kind.ARC
+        self.is_curve = (kind == Kind.CURVE) & (pr.curve >= 0)
+        line_len = np.linalg.norm(pr.end - pr.start, axis=1)
+        self.moving = self.is_arc | self.is_curve | ((kind == Kind.LINE) & (line_len > 0))
+        self.arcs = (
+            make_arcs(pr.start, pr.end, np.nan_to_num(pr.center), np.where(pr.turn < 0, -1, 1), pr.plane) if n else None
+        )
+        self._curves: dict[int, CurveDistance] = {}
+        # nearest moving rows strictly before and after each row (-1: none)
+        idx = np.arange(n)
+        prev_incl = np.maximum.accumulate(np.where(self.moving, idx, -1)) if n else idx
+        next_incl = np.minimum.accumulate(np.where(self.moving, idx, n)[::-1])[::-1] if n else idx
+        self.prev = np.concatenate([[-1], prev_incl[:-1]]).astype(np.int64)
+        after = np.concatenate([next_incl[1:], [n]]).astype(np.int64)
+        self.next = np.where(after < n, after, -1)
+        # junction tolerances: that of the row after the junction, 0 where a row in between starts at rest
+        stops = np.concatenate([[0], np.cumsum(pr.stop_before.astype(np.int64))])  # stops[i]: in rows < i
+        tol_of = np.where(np.isinf(pr.blend_tol), corner_tol_mm, pr.blend_tol)
+
+        def junction(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            ok = (a >= 0) & (b >= 0)
+            a_, b_ = np.where(ok, a, 0), np.where(ok, b, 0)
+            stop = stops[b_ + 1] - stops[a_ + 1] > 0
+            return np.where(ok & ~stop, tol_of[b_], 0.0)
+
+        self.tol_in = np.where(self.moving, junction(self.prev, idx), junction(self.prev, self.next))
+        self.tol_out = np.where(self.moving, junction(idx, self.next), 0.0)
+        self.allowed = np.maximum(self.tol_in, self.tol_out)
+        # corner zones around start[r] and end[r] (for the "away from corners" figure only)
+        t_in, t_out = self._tangents()
+
+        def zone(a: np.ndarray, b: np.ndarray, tol: np.ndarray) -> np.ndarray:
+            cos = np.sum(t_out[np.where(a >= 0, a, 0)] * t_in[np.where(b >= 0, b, 0)], axis=1)
+            theta = np.arccos(np.clip(cos, -1.0, 1.0))
+            ok = (a >= 0) & (b >= 0) & (tol > 0) & (theta > CORNER_MIN_TURN_RAD)
+            return np.where(ok, 16.0 * tol / (3.0 * np.sin(np.maximum(theta, CORNER_MIN_TURN_RAD) / 2)), 0.0)
+
+        self.zone_in = np.where(self.moving, zone(self.prev, idx, self.tol_in), 0.0)
+        self.zone_out = np.where(self.moving, zone(idx, self.next, self.tol_out), 0.0)
+
+    def curve(self, i: int) -> CurveDistance:
+        """The distance function of spline ``i`` of the program (built once)."""
+        if i not in self._curves:
+            self._curves[i] = CurveDistance(*self.program.curves.curve(i))
+        return self._curves[i]
+
+    def _tangents(self) -> tuple[np.ndarray, np.ndarray]:
+        pr = self.program
+        d = pr.end - pr.start
+        ln = np.linalg.norm(d, axis=1, keepdims=True)
+        t_in = d / np.where(ln > 0, ln, 1.0)
+        t_out = t_in.copy()
+        if self.is_arc.any():
+            a = np.flatnonzero(self.is_arc)
+            t_in[a], t_out[a] = self.arcs.take(a).tangents()
+        for r in np.flatnonzero(self.is_curve):
+            t_in[r], t_out[r] = self.curve(int(pr.curve[r])).end_tangents()
+        return t_in, t_out
+
+    def distance(self, p: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Distance from points ``p`` ``(m, 3)`` to the programmed geometry of ``rows`` ``(m,)``."""
+        pr = self.program
+        out = segment_distance(p, pr.start[rows], pr.end[rows])  # lines; points for rows that stand
+        arc = np.flatnonzero(self.is_arc[rows])
+        if arc.size:
+            out[arc] = arc_distance(p[arc], self.arcs.take(rows[arc]))
+        crv = np.flatnonzero(self.is_curve[rows])
+        if crv.size:
+            ids = pr.curve[rows[crv]]
+            for i in np.unique(ids):
+                sel = crv[ids == i]
+                out[sel] = self.curve(int(i)).distance(p[sel])
+        return out
+
+
+# ----------------------------------------------------------------------------------------------
+# Loading the program of a table, and the check itself
+
+
+def program_start(machine: MachineConfig) -> np.ndarray:
+    """Program position (x, y, z) at the start: each axis' home, 0 for axes the machine lacks (as planned)."""
+    return np.array([machine.axis(a).home if a in machine.axis_names else 0.0 for a in PROGRAM_AXES])
+
+
+def program_for_table(
+    table: TableFile,
+    machine: MachineConfig,
+    gcode_suffixes: tuple[str, ...],
+    program: Path | None = None,
+    dialect: str | None = None,
+) -> tuple[Program | None, str]:
+    """The Program to compare ``table`` with, or ``(None, why not)``.
+
+    With ``program`` that file is read (it must exist: a missing one raises
+    :class:`~jaxcnc.errors.JaxcncError`, as does one that cannot be parsed). Without it the table's
+    header names the source (a relative name is looked for from the working directory, then from the
+    table's folder); it is compared only when it is a G-code file (``gcode_suffixes``) that is present and
+    unchanged (its SHA-256 equals the header's ``source_sha256``) and parses — otherwise the
+    reason is returned and the check is skipped, which is neither a pass nor a failure.
+    """
+    from jaxcnc.errors import SourceError
+    from jaxcnc.gcode import load_gcode
+
+    if not np.any(table.events["kind"] == EventKind.BLOCK):
+        return None, "the table has no block events (a point job?): nothing ties its ticks to program rows"
+    start = program_start(machine)
+    if program is not None:
+        if not Path(program).is_file():
+            raise JaxcncError(f"{program}: no such program file")
+        return load_gcode(program, start=start, home=start, dialect=dialect), ""
+    meta = table.header.meta
+    source = str(meta.get("source", ""))
+    if not source:
+        return None, "the table names no source program; pass --program FILE"
+    src = Path(source)
+    if src.suffix.lower() not in gcode_suffixes:
+        return None, f"its source {source!r} is not a G-code program"
+    if not src.is_file() and not src.is_absolute() and (table.path.parent / src).is_file():
+        src = table.path.parent / src  # planned from the table's folder
+    if not src.is_file():
+        return None, f"its source program {source!r} is not here; pass --program FILE"
+    want = meta.get("source_sha256")
+    if want and file_sha256(src) != want:
+        return None, f"{source} changed since the table was planned (checksum differs); pass --program FILE"
+    try:
+        return load_gcode(src, start=start, home=start, dialect=dialect), ""
+    except SourceError as exc:
+        return None, f"its source cannot be read ({exc}); pass --dialect or --program"
+
+
+def _block_rows(table: TableFile, program: Program) -> tuple[np.ndarray, np.ndarray]:
+    """Ticks and program rows of the table's BLOCK events, checked against the program."""
+    ev = table.events[table.events["kind"] == EventKind.BLOCK]
+    if ev.size == 0:
+        raise JaxcncError(f"{table.path}: the table has no block events to tie its ticks to program rows")
+    rows = ev["value"].astype(np.int64)
+    bad = (rows < 0) | (rows >= len(program)) | (ev["value"] != rows)
+    if not bad.any():
+        bad = program.line[rows] != ev["aux"].astype(np.int64)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise JaxcncError(
+            f"{table.path}: block event at tick {int(ev['tick'][i])} names program row {ev['value'][i]:g} "
+            f"(line {int(ev['aux'][i])}), which {program.file} does not have: not the program of this table"
+        )
+    n_meta = table.header.meta.get("n_blocks")
+    if n_meta is not None and int(n_meta) != len(program):
+        raise JaxcncError(
+            f"{table.path}: planned from a program of {n_meta} blocks, {program.file} has {len(program)}: "
+            "not the program of this table"
+        )
+    return ev["tick"].astype(np.int64), rows
+
+
+def path_deviation(
+    table: TableFile,
+    machine: MachineConfig,
+    program: Program,
+    *,
+    slack_mm: float = SLACK_MM,
+    chunk_rows: int = CHUNK_ROWS,
+) -> PathDeviation:
+    """Measure every tick's distance from the programmed path of ``program`` and compare it with the
+    tolerance allowed there (module docstring). Streams the table ``chunk_rows`` ticks at a time."""
+    h = table.header
+    geo = ProgramPath(program, machine.path.corner_tol_mm)
+    ev_tick, ev_row = _block_rows(table, program)
+    axes = h.axes
+    cols = [(i, PROGRAM_AXES.index(a)) for i, a in enumerate(axes) if a in PROGRAM_AXES]
+    fixed = [c for c in range(3) if c not in {c for _, c in cols}]
+    start = program.start[0] if len(program) else program_start(machine)
+    n = h.n_rows
+    best, worst_tick, away_max, n_away, n_over, max_tol = -1.0, 0, -1.0, 0, 0, 0.0
+    pending: list[tuple[int, int, float, float, int]] = []
+    with TableRows(table) as reader:
+        for s in range(0, n, chunk_rows):
+            e = min(s + chunk_rows, n)
+            m_pos = reader.exact_mm(s, e)
+            p = np.empty((e - s, 3))
+            for i, c in cols:
+                p[:, c] = m_pos[:, i]
+            for c in fixed:
+                p[:, c] = start[c]
+            ticks = np.arange(s, e)
+            row = ev_row[np.maximum(np.searchsorted(ev_tick, ticks, side="right") - 1, 0)]
+            dist = geo.distance(p, row)  # its own row; the neighbours only where that is not already ~0
+            far = np.flatnonzero(dist > ON_PATH_MM)
+            for other in (geo.prev[row[far]], geo.next[row[far]]):
+                sel = far[other >= 0]
+                dist[sel] = np.minimum(dist[sel], geo.distance(p[sel], other[other >= 0]))
+            allowed = geo.allowed[row] + slack_mm
+            max_tol = max(max_tol, float(geo.allowed[row].max()))
+            j = int(np.argmax(dist))
+            if dist[j] > best:
+                best, worst_tick = float(dist[j]), s + j
+            away = (np.linalg.norm(p - program.start[row], axis=1) > geo.zone_in[row]) & (
+                np.linalg.norm(p - program.end[row], axis=1) > geo.zone_out[row]
+            )
+            if away.any():
+                n_away += int(away.sum())
+                away_max = max(away_max, float(dist[away].max()))
+            over = dist > allowed
+            n_over += int(over.sum())
+            for r0, r1 in _runs(over):
+                w = r0 + int(np.argmax(dist[r0 : r1 + 1]))
+                pending.append((s + r0, s + r1, float(dist[w]), float(allowed[w]), int(program.line[row[w]])))
+    merged: list[list] = []
+    for r0, r1, v, lim, line in pending:  # join runs split by chunk boundaries
+        if merged and r0 == merged[-1][1] + 1:
+            if v > merged[-1][2]:
+                merged[-1][2:] = [v, lim, line]
+            merged[-1][1] = r1
+        else:
+            merged.append([r0, r1, v, lim, line])
+    worst_row = int(ev_row[max(int(np.searchsorted(ev_tick, worst_tick, side="right")) - 1, 0)])
+    return PathDeviation(
+        n_ticks=n,
+        max_mm=max(best, 0.0),
+        worst_tick=worst_tick,
+        worst_row=worst_row,
+        worst_line=int(program.line[worst_row]),
+        allowed_at_worst_mm=float(geo.allowed[worst_row] + slack_mm),
+        n_over=n_over,
+        max_away_mm=away_max if n_away else math.nan,
+        n_away=n_away,
+        max_tol_mm=max_tol,
+        slack_mm=slack_mm,
+        violations=[Violation(r0, r1, f"line {line}", "path", v, lim) for r0, r1, v, lim, line in merged],
+    )
