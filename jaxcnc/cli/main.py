@@ -345,7 +345,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if len(shown) < len(meas.violations):
         print(f"... and {len(meas.violations) - len(shown)} more violations")
     if meas.path is not None or meas.pulses is None:
-        print(_path_line(meas))
+        print(_path_line(meas), file=sys.stderr)  # standard output: the violations only
     print(f"FAILED {args.table}: {len(meas.violations)} violations", file=sys.stderr)
     return 1
 

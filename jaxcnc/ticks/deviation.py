@@ -28,9 +28,10 @@ What is compared with what, tick by tick:
 * **Distances.** Line segments: closed form. Circular arcs (G17/G18/G19, ``turn`` +1 counter-clockwise
   seen from the plane normal, a full circle where end = start in the plane): exact — the nearest point is
   at the query's angle when that lies in the sweep, else the nearer end. Helices (the normal coordinate
-  rises linearly with the angle): the smallest distance over 32 samples per turn refined by Newton's
-  method; every candidate is a point of the helix, so the figure is never below the true distance (an
-  upper bound, exact where Newton converged — to ~1e-12 mm in practice). Splines (clamped NURBS): the
+  rises linearly with the angle): the smallest distance over 8 samples per turn and Newton's method
+  started from the best of them, from the height match and from the in-plane matches next to it; every
+  candidate is a point of the helix, so the figure is never below the true distance (an upper bound,
+  exact where Newton converged — to ~1e-12 mm in practice). Splines (clamped NURBS): the
   homogeneous control points ``(w·P, w)`` evaluated with ``scipy.interpolate.BSpline``, sampled densely
   (one sample per :data:`CURVE_SPACING_MM` of control polygon, at least 8 per knot span), the nearest
   sample found with a k-d tree and refined by Newton projection on the curve; again every candidate is a
@@ -75,6 +76,8 @@ PLANE_AXES = {17: (0, 1, 2), 18: (2, 0, 1), 19: (1, 2, 0)}
 FULL_CIRCLE_MM = 1e-9
 #: Junctions turning less than this are no corners for the "away from corners" figure (tangent joins).
 CORNER_MIN_TURN_RAD = 1e-6
+#: Samples per turn of a helix that start its Newton refinement (with the height match).
+HELIX_SAMPLES = 8
 #: Newton steps refining the nearest point on a helix or spline.
 NEWTON_STEPS = 8
 _TWO_PI = 2.0 * math.pi
@@ -218,23 +221,32 @@ def _helix_distance(
             + (w[:, None] - kappa[:, None] * th) ** 2
         )
 
-    n = 32 * max(1, int(np.ceil(np.max(span) / _TWO_PI))) + 1
-    th = span[:, None] * np.linspace(0.0, 1.0, n)[None, :]
-    # candidates: the samples, the height match and the in-plane matches t0 + 2πn near it
+    n = HELIX_SAMPLES * max(1, int(np.ceil(np.max(span) / _TWO_PI))) + 1
+    samples = span[:, None] * np.linspace(0.0, 1.0, n)[None, :]
+    fv = f(samples)
+    best = fv.min(axis=1)
+    # Newton from the best sample, the height match and the in-plane matches t0 + 2πn next to it
     th_h = np.clip(w / kappa, 0.0, span)
     n_h = np.floor((th_h - t0) / _TWO_PI)
-    extra = np.stack([th_h, t0 + n_h * _TWO_PI, t0 + (n_h + 1) * _TWO_PI], axis=1)
-    th = np.concatenate([th, np.clip(extra, 0.0, span[:, None])], axis=1)
-    fv = f(th)
-    best = fv.min(axis=1)
-    starts = np.stack([th[np.arange(th.shape[0]), np.argmin(fv[:, :n], axis=1)], *extra.T], axis=1)
-    x = np.clip(starts, 0.0, span[:, None])
-    a = (rho * radius)[:, None]
+    x = np.stack(
+        [samples[np.arange(n_h.size), np.argmin(fv, axis=1)], th_h, t0 + n_h * _TWO_PI, t0 + (n_h + 1) * _TWO_PI],
+        axis=1,
+    )
+    # refine every start on its own (flattened); each stops when its step vanishes
+    cols = x.shape[1]
+    x = np.clip(x, 0.0, span[:, None]).ravel()
+    a, k, ww, tt, hi = (np.repeat(v, cols) for v in (rho * radius, kappa, w, t0, span))
+    todo = np.arange(x.size)
     for _ in range(NEWTON_STEPS):
-        d1 = 2 * a * np.sin(x - t0[:, None]) - 2 * kappa[:, None] * (w[:, None] - kappa[:, None] * x)
-        d2 = 2 * a * np.cos(x - t0[:, None]) + 2 * kappa[:, None] ** 2
-        x = np.clip(x - np.where(d2 > 0, d1 / np.where(d2 > 0, d2, 1.0), 0.0), 0.0, span[:, None])
-        best = np.minimum(best, f(x).min(axis=1))
+        xt, at, kt = x[todo], a[todo], k[todo]
+        d1 = 2 * at * np.sin(xt - tt[todo]) - 2 * kt * (ww[todo] - kt * xt)
+        d2 = 2 * at * np.cos(xt - tt[todo]) + 2 * kt * kt
+        x_new = np.clip(xt - np.where(d2 > 0, d1 / np.where(d2 > 0, d2, 1.0), 0.0), 0.0, hi[todo])
+        x[todo] = x_new
+        todo = todo[np.abs(x_new - xt) > 1e-13]
+        if todo.size == 0:
+            break
+    best = np.minimum(best, f(x.reshape(-1, cols)).min(axis=1))
     return np.sqrt(np.maximum(best, 0.0))
 
 
@@ -542,8 +554,9 @@ def path_deviation(
             j = int(np.argmax(dist))
             if dist[j] > best:
                 best, worst_tick = float(dist[j]), s + j
-            away = (np.linalg.norm(p - program.start[row], axis=1) > geo.zone_in[row]) & (
-                np.linalg.norm(p - program.end[row], axis=1) > geo.zone_out[row]
+            z_in, z_out = geo.zone_in[row], geo.zone_out[row]
+            away = ((z_in == 0) | (np.linalg.norm(p - program.start[row], axis=1) > z_in)) & (
+                (z_out == 0) | (np.linalg.norm(p - program.end[row], axis=1) > z_out)
             )
             if away.any():
                 n_away += int(away.sum())
