@@ -53,7 +53,7 @@ class PathConfig:
     feed: float  # mm/s, contour feed when the program sets none
     rapid: float  # mm/s, cap on G0 moves
     chord_tol_mm: float  # max chord error between consecutive ticks
-    corner_tol_mm: float  # 0 = exact corners
+    corner_tol_mm: float  # G64 without P: corners blended within this (0 = exact corners)
 
 
 @dataclass(frozen=True)
@@ -159,6 +159,13 @@ def _laser_mode(v: str) -> str | None:
     return None if v in ("cw", "pulsed", "pso") else f"unknown laser mode {v!r}; expected cw, pulsed or pso"
 
 
+#: Corner blending tolerance (mm) for G64 without P when the machine file sets none. RS274's G64
+#: without P means "best speed"; an unbounded deviation would let a corner's blend take half of each
+#: line. 0.01 mm is below what a laser cut shows (a kerf is 0.1–0.3 mm wide; cutting tables repeat to
+#: ±0.02–0.05 mm) and lets the 0.1–5° kinks of CAM polylines and the corners of chord-cut curves pass at
+#: speed. ``corner_tol_mm = 0`` in a machine file keeps every corner exact.
+DEFAULT_CORNER_TOL_MM = 0.01
+
 Check = Callable[[Any], "str | None"] | None
 _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
     "machine": {
@@ -178,7 +185,7 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "feed": ("number", True, None, _speed),
         "rapid": ("number", True, None, _speed),
         "chord_tol_mm": ("number", False, 0.001, _positive),
-        "corner_tol_mm": ("number", False, 0.0, _nonneg),
+        "corner_tol_mm": ("number", False, DEFAULT_CORNER_TOL_MM, _nonneg),
     },
     "laser": {
         "mode": ("string", False, "cw", _laser_mode),

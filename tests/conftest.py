@@ -40,6 +40,7 @@ max = 100.0
 feed = 50.0
 rapid = {rapid:g}
 chord_tol_mm = 0.001
+corner_tol_mm = 0.0
 """
 
 

@@ -20,8 +20,17 @@ def test_example_machine_loads():
     assert m.tick_hz == 10000 and m.discrete_mm == 0.001
     assert m.axis("x").v_max == 250.0 and m.axis("y").a_max == 4000.0
     assert m.axis("x").j_max is None
-    assert m.path.rapid == 250.0 and m.path.corner_tol_mm == 0.0
+    assert m.path.rapid == 250.0 and m.path.corner_tol_mm == 0.01
     assert m.laser.mode == "cw"
+
+
+def test_corner_tolerance_defaults_to_a_bounded_blend_and_zero_keeps_corners_exact():
+    from jaxcnc.machine import DEFAULT_CORNER_TOL_MM
+
+    unset = machine_text().replace("corner_tol_mm = 0.0\n", "")
+    assert "corner_tol_mm" not in unset
+    assert parse_machine(unset).path.corner_tol_mm == DEFAULT_CORNER_TOL_MM == 0.01
+    assert parse_machine(machine_text()).path.corner_tol_mm == 0.0
 
 
 def test_config_is_immutable():
@@ -63,7 +72,7 @@ def _line_of(text: str, needle: str) -> int:
         ("discrete_mm = 0.001", "discrete_mm = 1", "machine.discrete_mm", "did you mean"),
         ("chord_tol_mm = 0.001", "chord_tol_mm = -0.001", "path.chord_tol_mm", "positive"),
         ("rapid = 100", "rapid = 0", "path.rapid", "positive"),
-        ("[path]", '[path]\ncorner_tol_mm = "none"', "path.corner_tol_mm", "expected a number"),
+        ("corner_tol_mm = 0.0", 'corner_tol_mm = "none"', "path.corner_tol_mm", "expected a number"),
     ],
 )
 def test_each_mistake_is_named(old, new, key, reason):

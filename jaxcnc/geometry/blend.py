@@ -56,6 +56,8 @@ N_DEVIATION = 17
 SHRINK_ROUNDS = 8
 #: Rounds of giving up a chain curvature where a blend would leave the tolerance.
 CHAIN_ROUNDS = 4
+#: A line whose blends leave less than this share of it is consumed by them (see :func:`_consume`).
+SNAP = 0.25
 
 
 def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) -> np.ndarray:
@@ -114,19 +116,20 @@ def _piece_distance(p: np.ndarray, spans: Spans, idx: np.ndarray, s_lo: np.ndarr
 
 
 def _blend_points(
-    spans: Spans, i: np.ndarray, ell: np.ndarray, k_mid: np.ndarray | None = None
+    spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, k_mid: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quintic G2 blends of junctions after spans ``i`` cut back by ``ell``: control points ``(J, 6, 3)``, Ta, Tb.
+    """Quintic G2 blends of the junctions after spans ``i``, which are cut back by ``ell_a`` and the spans
+    after them by ``ell_b``: control points ``(J, 6, 3)``, Ta, Tb.
 
     ``k_mid``: ``(n, 3)`` curvature vectors at the middles of consumed lines (:func:`_chain_curvature`),
     used where a blend starts or ends there.
     """
     arrays = span_arrays(spans)
-    qa, ta, ka = evaluate_path(arrays, i, spans.length[i] - ell, 2)
-    qb, tb, kb = evaluate_path(arrays, i + 1, ell, 2)
+    qa, ta, ka = evaluate_path(arrays, i, spans.length[i] - ell_a, 2)
+    qb, tb, kb = evaluate_path(arrays, i + 1, ell_b, 2)
     if k_mid is not None:
         ka, kb = ka + k_mid[i], kb + k_mid[i + 1]  # a line's own curvature is 0
-    lam = (2.0 * ell)[:, None]
+    lam = (ell_a + ell_b)[:, None]
     p1 = qa + lam / 5 * ta
     p2 = 2 * p1 - qa + lam**2 / 20 * ka
     p4 = qb - lam / 5 * tb
@@ -152,19 +155,47 @@ def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
 _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axis=1)
 
 
-def _deviation(spans: Spans, i: np.ndarray, ell: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound)."""
     u = np.broadcast_to(np.linspace(0.0, 1.0, N_DEVIATION), (i.size, N_DEVIATION))
     p, _, d2 = poly.bezier_derivatives(coeffs, u, 2)  # relative to A
-    p = p + evaluate_path(span_arrays(spans), i, spans.length[i] - ell)[0][:, None]
-    d_in = _piece_distance(p, spans, i, spans.length[i] - ell, spans.length[i])
-    d_out = _piece_distance(p, spans, i + 1, np.zeros_like(ell), ell)
+    p = p + evaluate_path(span_arrays(spans), i, spans.length[i] - ell_a)[0][:, None]
+    d_in = _piece_distance(p, spans, i, spans.length[i] - ell_a, spans.length[i])
+    d_out = _piece_distance(p, spans, i + 1, np.zeros_like(ell_b), ell_b)
     # between samples the distance can exceed the sampled one by at most max|P''| h² / 8
     h = 1.0 / (N_DEVIATION - 1)
     return np.max(np.minimum(d_in, d_out), axis=1) + np.max(np.linalg.norm(d2, axis=2), axis=1) * h * h / 8
 
 
-def _chain_curvature(spans: Spans, j: np.ndarray, ell: np.ndarray) -> np.ndarray:
+def _trims(n: int, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(trim_start, trim_end)`` ``(n,)``: how much of each span the blends at its ends take."""
+    trim_start, trim_end = np.zeros(n), np.zeros(n)
+    trim_end[j], trim_start[j + 1] = ell_a, ell_b
+    return trim_start, trim_end
+
+
+def _consume(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> None:
+    """Where the blends at both ends of a line leave less than ``SNAP`` of it, they take all of it.
+
+    A curve cut into chords of slightly different lengths (coordinates rounded by the post) would
+    otherwise keep a sliver of every chord but the shortest, and the blends could not meet with a
+    common curvature there (:func:`_chain_curvature`). The junctions at its ends become a little
+    asymmetric (``ℓ_a ≠ ℓ_b``); every blend's deviation is measured afterwards. In place.
+    """
+    n = len(spans)
+    trim_start, trim_end = _trims(n, j, ell_a, ell_b)
+    both = (spans.kind == SpanKind.LINE) & (trim_start > 0) & (trim_end > 0)
+    left = spans.length - trim_start - trim_end
+    snap = np.flatnonzero(both & (left > 0) & (left < SNAP * spans.length))
+    if snap.size == 0:
+        return
+    scale = np.ones(n)
+    scale[snap] = spans.length[snap] / (trim_start[snap] + trim_end[snap])
+    ell_a *= scale[j]  # span j's end
+    ell_b *= scale[j + 1]  # span j+1's start
+
+
+def _chain_curvature(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> np.ndarray:
     """``(n, 3)`` curvature vectors at the middles of lines the blends on both sides consume (0 elsewhere).
 
     Two blends that meet in the middle of a line may meet there with any common curvature; with the
@@ -174,8 +205,7 @@ def _chain_curvature(spans: Spans, j: np.ndarray, ell: np.ndarray) -> np.ndarray
     circle cut into chords every blend is then close to an arc of the circle.
     """
     n = len(spans)
-    trim_start, trim_end = np.zeros(n), np.zeros(n)
-    trim_end[j], trim_start[j + 1] = ell, ell
+    trim_start, trim_end = _trims(n, j, ell_a, ell_b)
     k_mid = np.zeros((n, 3))
     consumed = (
         (spans.kind == SpanKind.LINE)
@@ -211,36 +241,36 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     for _ in range(SHRINK_ROUNDS):
         if check.size == 0:
             break
-        pts, _, _ = _blend_points(spans, j[check], ell[check])
-        dev = _deviation(spans, j[check], ell[check], _coeffs(pts))
+        pts, _, _ = _blend_points(spans, j[check], ell[check], ell[check])
+        dev = _deviation(spans, j[check], ell[check], ell[check], _coeffs(pts))
         bad = dev > tol[j[check]]
         ell[check[bad]] *= np.clip(0.95 * tol[j[check[bad]]] / dev[bad], 0.05, 0.95)
         check = check[bad]
     keep[check] = False  # still too far after the rounds: an exact corner
-    j, ell = j[keep], ell[keep]
-    keep_len = ell > MIN_LENGTH_MM
-    j, ell = j[keep_len], ell[keep_len]
+    keep &= ell > MIN_LENGTH_MM
+    j, ell, lines = j[keep], ell[keep], lines[keep]
     if j.size == 0:
         return spans
-    # chains of consumed lines: blends meet with a common curvature, where it keeps them within tol
-    # chains of consumed lines: blends meet with a common curvature, where it keeps them within tol
-    k_mid = _chain_curvature(spans, j, ell)
+    # chords of a curve: consume them whole, and let the blends meet with a common curvature, where
+    # that keeps them within tol (else back to symmetric cuts and the line's own curvature, 0)
+    ell_a, ell_b = ell.copy(), ell.copy()
+    _consume(spans, j, ell_a, ell_b)
+    k_mid = _chain_curvature(spans, j, ell_a, ell_b)
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
-    lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
     for _ in range(CHAIN_ROUNDS + 1):
-        pts, ta, tb = _blend_points(spans, j, ell, k_mid)
+        pts, ta, tb = _blend_points(spans, j, ell_a, ell_b, k_mid)
         found = _kernel(pts, corner)
-        chain = np.any(k_mid[j] != 0, axis=1) | np.any(k_mid[j + 1] != 0, axis=1)
-        bad = np.flatnonzero(chain & lines & (found["dev"] > tol[j]))
+        changed = lines & ((ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1))
+        bad = np.flatnonzero(changed & (found["dev"] > tol[j]))
         if bad.size == 0:
             break
-        k_mid[j[bad]] = 0.0  # back to the line's own curvature at both ends: the closed-form deviation
-        k_mid[j[bad] + 1] = 0.0
+        # give up the snap and the chain curvature around these blends
+        for side in (j[bad], j[bad] + 1):
+            k_mid[side] = 0.0
+        undo = np.isin(j, j[bad]) | np.isin(j + 1, j[bad] + 1) | np.isin(j, j[bad] + 1) | np.isin(j + 1, j[bad])
+        ell_a[undo], ell_b[undo] = ell[undo], ell[undo]
     fields_, table, owner = _blend_fields(spans, j, pts, found, ta, tb)
-    trim_start = np.zeros(len(spans))
-    trim_end = np.zeros(len(spans))
-    trim_end[j] = ell
-    trim_start[j + 1] = ell
+    trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
     trimmed, arcs = _trim(spans, trim_start, trim_end)
     alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
     cols = {k: np.concatenate([trimmed[k][alive], fields_[k]]) for k in trimmed}
