@@ -76,7 +76,7 @@ def test_every_junction_kind_blends_within_the_tolerance(tmp_path, name, tol):
 
 
 def test_blend_joints_are_g2_for_arcs_and_helices():
-    text = "G64 P0.05\nG1 X10 F600\nG3 X15 Y5 R6\nG2 X20 Y6 R4\nG1 X20 Y0 Z2\nG3 X20 Y0 Z4 I-3 J0\nG1 X9 Y9 Z4\n"
+    text = "G64 P0.05\nG1 X10 F600\nG3 X15 Y5 R6\nG2 X20 Y6 R4\nG1 X20 Y0 Z2\nG2 X20 Y0 Z4 I-3 J0\nG1 X9 Y9 Z4\n"
     sp = build_spans(parse_gcode(text, "b.ngc"))
     assert n_blends(sp) >= 5
     moving = np.flatnonzero((sp.kind[:-1] != SpanKind.POINT) & (sp.kind[1:] != SpanKind.POINT))
