@@ -156,15 +156,39 @@ _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axi
 
 
 def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
-    """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound)."""
+    """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound).
+
+    ``min(d_in, d_out)`` is smooth where one piece is the nearer — between samples ``h`` apart it rises
+    above them by at most ``max|P''| h²/8`` — and peaks where the two are equal: there the crossing
+    is found by bisection between the samples that bracket it and measured.
+    """
+    start = evaluate_path(span_arrays(spans), i, spans.length[i] - ell_a)[0][:, None]
+
+    def dist(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = poly.bezier_derivatives(coeffs, u, 0)[0] + start  # the blend is relative to A
+        d_in = _piece_distance(p, spans, i, spans.length[i] - ell_a, spans.length[i])
+        return d_in, _piece_distance(p, spans, i + 1, np.zeros_like(ell_b), ell_b)
+
     u = np.broadcast_to(np.linspace(0.0, 1.0, N_DEVIATION), (i.size, N_DEVIATION))
-    p, _, d2 = poly.bezier_derivatives(coeffs, u, 2)  # relative to A
-    p = p + evaluate_path(span_arrays(spans), i, spans.length[i] - ell_a)[0][:, None]
-    d_in = _piece_distance(p, spans, i, spans.length[i] - ell_a, spans.length[i])
-    d_out = _piece_distance(p, spans, i + 1, np.zeros_like(ell_b), ell_b)
-    # between samples the distance can exceed the sampled one by at most max|P''| h² / 8
+    d_in, d_out = dist(u)
+    d2 = poly.bezier_derivatives(coeffs, u, 2)[2]
     h = 1.0 / (N_DEVIATION - 1)
-    return np.max(np.minimum(d_in, d_out), axis=1) + np.max(np.linalg.norm(d2, axis=2), axis=1) * h * h / 8
+    smooth = np.max(np.minimum(d_in, d_out), axis=1) + np.max(np.linalg.norm(d2, axis=2), axis=1) * h * h / 8
+    # the crossing: the first sample interval where the nearer piece changes (one per blend)
+    side = d_in < d_out
+    change = side[:, :-1] != side[:, 1:]
+    has = change.any(axis=1)
+    k = np.argmax(change, axis=1)
+    lo, hi = u[np.arange(i.size), k].copy(), u[np.arange(i.size), k + 1].copy()
+    lo_side = side[np.arange(i.size), k]
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        a, b = dist(mid[:, None])
+        same = (a[:, 0] < b[:, 0]) == lo_side
+        lo, hi = np.where(same, mid, lo), np.where(same, hi, mid)
+    a, b = dist(((lo + hi) / 2)[:, None])
+    crossing = np.where(has, np.maximum(a[:, 0], b[:, 0]), 0.0)
+    return np.maximum(smooth, crossing)
 
 
 def _trims(n: int, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -174,19 +198,20 @@ def _trims(n: int, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> tuple
     return trim_start, trim_end
 
 
-def _consume(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> None:
+def _consume(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, frozen: np.ndarray) -> None:
     """Where the blends at both ends of a line leave less than ``SNAP`` of it, they take all of it.
 
     A curve cut into chords of slightly different lengths (coordinates rounded by the post) would
     otherwise keep a sliver of every chord but the shortest, and the blends could not meet with a
     common curvature there (:func:`_chain_curvature`). The junctions at its ends become a little
-    asymmetric (``ℓ_a ≠ ℓ_b``); every blend's deviation is measured afterwards. In place.
+    asymmetric (``ℓ_a ≠ ℓ_b``); every blend's deviation is measured afterwards. Spans marked ``frozen``
+    are left as they are. In place.
     """
     n = len(spans)
     trim_start, trim_end = _trims(n, j, ell_a, ell_b)
     both = (spans.kind == SpanKind.LINE) & (trim_start > 0) & (trim_end > 0)
     left = spans.length - trim_start - trim_end
-    snap = np.flatnonzero(both & (left > 0) & (left < SNAP * spans.length))
+    snap = np.flatnonzero(both & ~frozen & (left > 0) & (left < SNAP * spans.length))
     if snap.size == 0:
         return
     scale = np.ones(n)
@@ -253,22 +278,28 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         return spans
     # chords of a curve: consume them whole, and let the blends meet with a common curvature, where
     # that keeps them within tol (else back to symmetric cuts and the line's own curvature, 0)
-    ell_a, ell_b = ell.copy(), ell.copy()
-    _consume(spans, j, ell_a, ell_b)
-    k_mid = _chain_curvature(spans, j, ell_a, ell_b)
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
+    frozen = np.zeros(len(spans), bool)  # spans left as they are: no snap, their own curvature
     for _ in range(CHAIN_ROUNDS + 1):
+        ell_a, ell_b = ell.copy(), ell.copy()
+        _consume(spans, j, ell_a, ell_b, frozen)
+        k_mid = _chain_curvature(spans, j, ell_a, ell_b)
+        k_mid[frozen] = 0.0
         pts, ta, tb = _blend_points(spans, j, ell_a, ell_b, k_mid)
         found = _kernel(pts, corner)
-        changed = lines & ((ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1))
-        bad = np.flatnonzero(changed & (found["dev"] > tol[j]))
+        changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
+        dev = found["dev"].copy()
+        other = np.flatnonzero(changed & ~lines)  # arcs take part: measure against the arc itself
+        if other.size:
+            dev[other] = _deviation(spans, j[other], ell_a[other], ell_b[other], _coeffs(pts[other]))
+        bad = np.flatnonzero(changed & (dev > tol[j]))
         if bad.size == 0:
             break
-        # give up the snap and the chain curvature around these blends
-        for side in (j[bad], j[bad] + 1):
-            k_mid[side] = 0.0
-        undo = np.isin(j, j[bad]) | np.isin(j + 1, j[bad] + 1) | np.isin(j, j[bad] + 1) | np.isin(j + 1, j[bad])
-        ell_a[undo], ell_b[undo] = ell[undo], ell[undo]
+        frozen[j[bad]] = frozen[j[bad] + 1] = True  # give up the snap and the chain curvature there
+    else:  # still too far: plain symmetric blends everywhere (within tol by construction or measurement)
+        ell_a, ell_b, k_mid = ell.copy(), ell.copy(), None
+        pts, ta, tb = _blend_points(spans, j, ell_a, ell_b)
+        found = _kernel(pts, corner)
     fields_, table, owner = _blend_fields(spans, j, pts, found, ta, tb)
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
     trimmed, arcs = _trim(spans, trim_start, trim_end)

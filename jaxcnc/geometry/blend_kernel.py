@@ -25,6 +25,8 @@ from jaxcnc.geometry import poly
 
 #: Points where a blend's parameter speed and maxima are checked (its check points).
 N_CHECK = 9
+#: Newton steps for the point where the blend crosses the corner's bisecting plane.
+CROSS_NEWTON = 6
 
 _M5 = np.array([[comb(5, k) * comb(k, i) * (-1) ** (k - i) for i in range(6)] for k in range(6)], float)
 _GX, _GW = poly._GX, poly._GW
@@ -90,13 +92,27 @@ def blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray
         + (q1[0] * q2[1] - q1[1] * q2[0]) ** 2
     )
     err = jnp.where(jnp.all(vv[1] > 0, axis=1), jnp.max(jnp.abs(s1 - 1.0), axis=1), jnp.inf)
-    # distance to the two straight pieces, at the quadrature nodes and the ends
+    # distance to the two straight pieces: min(d_in, d_out) is smooth where one of them is the nearer
+    # (sampled at the quadrature nodes and the ends, plus max|P''| h²/8 between samples), and peaks where
+    # they are equal — on the plane through the corner normal to t_in + t_out, which the blend crosses
+    # once: that point (Newton on the quintic (P(u) - C)·n = 0) is measured too
     us = jnp.concatenate([jnp.zeros((1, 1)), gx, jnp.ones((1, 1))], axis=1)
     pos = jnp.stack([_horner([ci[:, None] for ci in cx[i]], us, 0)[0] for i in range(3)], axis=2) + pts[:, :1, :]
     dist = jnp.minimum(_segment_distance(pos, pts[:, 0], corner), _segment_distance(pos, corner, pts[:, 5]))
-    d2max = jnp.max(
-        jnp.linalg.norm(jnp.stack([_horner([ci[:, None] for ci in cx[i]], us, 2)[2] for i in range(3)], 2), axis=2), 1
-    )
+    t_in = corner - pts[:, 0]
+    t_out = pts[:, 5] - corner
+    n = t_in / jnp.linalg.norm(t_in, axis=1, keepdims=True) + t_out / jnp.linalg.norm(t_out, axis=1, keepdims=True)
+    c0 = pts[:, 0] - corner
+    uc = jnp.full(length.shape, 0.5)
+    for _ in range(CROSS_NEWTON):
+        g = [_horner([ci for ci in cx[i]], uc, 1) for i in range(3)]
+        f = sum((g[i][0] + c0[:, i]) * n[:, i] for i in range(3))
+        fp = sum(g[i][1] * n[:, i] for i in range(3))
+        uc = jnp.clip(uc - f / jnp.where(fp != 0, fp, 1.0), 0.0, 1.0)
+    pc = jnp.stack([_horner([ci for ci in cx[i]], uc, 0)[0] for i in range(3)], axis=1)[:, None, :] + pts[:, :1, :]
+    at_cross = jnp.minimum(_segment_distance(pc, pts[:, 0], corner), _segment_distance(pc, corner, pts[:, 5]))[:, 0]
+    d2 = jnp.stack([_horner([ci[:, None] for ci in cx[i]], us, 2)[2] for i in range(3)], axis=2)
+    d2max = jnp.max(jnp.linalg.norm(d2, axis=2), axis=1)
     h = float(np.max(np.diff(np.concatenate([[0.0], _GX, [1.0]]))))
     t0 = p1_0 / jnp.linalg.norm(p1_0, axis=1, keepdims=True)
     t1 = p1_1 / jnp.linalg.norm(p1_1, axis=1, keepdims=True)
@@ -113,7 +129,7 @@ def blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray
         "hi": jnp.max(pts, axis=1),
         "t0": t0,
         "t1": t1,
-        "dev": jnp.max(dist, axis=1) + d2max * h * h / 8,
+        "dev": jnp.maximum(jnp.max(dist, axis=1) + d2max * h * h / 8, at_cross),
     }
 
 

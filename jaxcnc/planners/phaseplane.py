@@ -178,17 +178,26 @@ def forward_pieces(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[lis
     return a_list, b_list
 
 
-def backward_scan(x_static: jnp.ndarray, alpha: list, beta: list, x_end: jnp.ndarray) -> jnp.ndarray:
-    """``(m+1,)`` the controllable set's upper ends: the largest ``x`` from which the end is reachable."""
+def backward_scan(
+    x_static: jnp.ndarray, alpha: list, beta: list, x_end: jnp.ndarray, cap_b: jnp.ndarray | None = None
+) -> jnp.ndarray:
+    """``(m+1,)`` the controllable set's upper ends: the largest ``x`` from which the end is reachable.
 
-    def step(k_b, row):
-        xs, a, b = row
+    ``cap_b``: ``(m,)`` each interval's own cap at its end, where it is lower than the next interval's
+    cap at its start (a node between two intervals may be capped differently by each).
+    """
+    if cap_b is None:
+        cap_b = jnp.full(x_static.shape, jnp.inf)
+
+    def step(k_next, row):
+        xs, a, b, cb = row
+        k_b = jnp.minimum(k_next, cb)
         k_a = xs
         for aj, bj in zip(a, b, strict=True):
             k_a = jnp.minimum(k_a, aj * k_b + bj)
         return k_a, k_a
 
-    _, k = jax.lax.scan(step, x_end, (x_static, alpha, beta), reverse=True)
+    _, k = jax.lax.scan(step, x_end, (x_static, alpha, beta, cap_b), reverse=True)
     return jnp.concatenate([k, x_end[None]])
 
 
@@ -228,7 +237,7 @@ def solve(
     gu, gx, h = rows
     if curved:
         x_static = static_cap(gu, gx, h, cap_a)
-        k = backward_scan(x_static, *backward_pieces(gu, gx, h, delta), x_end)
+        k = backward_scan(x_static, *backward_pieces(gu, gx, h, delta), x_end, h[-2])
         return forward_scan(*forward_pieces(gu, gx, h, delta), delta, k)
     # Lines only (gx = 0 on the axis rows): the node caps and min(B, x + D) in both directions.
     node_cap = jnp.concatenate([cap_a, x_end[None]])
