@@ -163,8 +163,8 @@ def plan_and_check(program_path: Path, machine: MachineConfig, folder: Path, rep
 
 def run_corner_benchmarks(peers: str | Path | None = None, repeats: int = 5, own: bool = True) -> dict:
     """Run the suite; print the table and return the figures."""
+    folder = peers_dir(peers)  # before anything is printed: a missing input is an error, not a run
     info = run_header("corners")
-    folder = peers_dir(peers)
     programs = read_peers_readme(folder)
     own_dir = own_programs_dir() if own else None
     if own_dir is not None:

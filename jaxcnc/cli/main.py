@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from contextlib import nullcontext
 from importlib import resources
 from pathlib import Path
@@ -19,185 +18,11 @@ import numpy as np
 
 import jaxcnc
 from jaxcnc.errors import JaxcncError
-
-GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
-POINT_SUFFIXES = (".xyz", ".csv")
-LATER_SUFFIXES = {".dxf": "DXF", ".stl": "STL"}
+from jaxcnc.jobs import GCODE_SUFFIXES, check_table, plan_file  # noqa: F401  (GCODE_SUFFIXES: part of the CLI's API)
 
 
 def _fmt_axes(d: dict[str, float], unit: str) -> str:
     return ", ".join(f"{a}={v:.4g}" for a, v in d.items()) + f" {unit}"
-
-
-def _load_program(path: Path, machine, dialect: str | None = None):
-    from jaxcnc.gcode import load_gcode
-    from jaxcnc.planners import program_start
-
-    suffix = path.suffix.lower()
-    if suffix in LATER_SUFFIXES:
-        raise JaxcncError(f"{path}: {LATER_SUFFIXES[suffix]} input is not supported yet")
-    if suffix not in GCODE_SUFFIXES:
-        raise JaxcncError(
-            f"{path}: unknown input type {suffix!r}; G-code files end in {', '.join(GCODE_SUFFIXES)}, "
-            f"point files in {', '.join(POINT_SUFFIXES)}"
-        )
-    start = program_start(machine)
-    return load_gcode(path, start=start, home=start, dialect=dialect)
-
-
-def is_point_job(input_path: Path, machine) -> bool:
-    """Point-by-point pulsed engraving: a point file, or G-code on a machine whose laser is pulsed."""
-    suffix = input_path.suffix.lower()
-    if suffix in POINT_SUFFIXES:
-        if machine.laser.mode != "pulsed":
-            raise JaxcncError(
-                f'{input_path}: point files are burned point by point, which needs [laser] mode = "pulsed" '
-                f"(machine {machine.name!r} has mode {machine.laser.mode!r})"
-            )
-        return True
-    return machine.laser.mode == "pulsed"
-
-
-def load_point_job(input_path: Path, machine, dialect: str | None = None):
-    """The points of a point job: read from a point file, or the G1 end points of a program."""
-    from jaxcnc.io.points import points_from_program, read_points
-
-    if input_path.suffix.lower() in POINT_SUFFIXES:
-        return read_points(input_path)
-    return points_from_program(_load_program(input_path, machine, dialect))
-
-
-def plan_file(
-    input_path: Path,
-    machine_path: Path,
-    out: Path,
-    planner: str | None = None,
-    progress: bool | None = None,
-    dialect: str | None = None,
-    reorder: bool = False,
-) -> dict:
-    """Plan ``input_path`` on the machine and write the table; return the report dict."""
-    from jaxcnc.machine import load_machine
-
-    machine = load_machine(machine_path)
-    if is_point_job(input_path, machine):
-        return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
-    if reorder:
-        raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
-    from jaxcnc.planners.registry import DEFAULT_PLANNER
-
-    return plan_program_file(input_path, machine, out, planner or DEFAULT_PLANNER, progress, dialect)
-
-
-def _measured(meas) -> dict:
-    return {"max_abs_v": meas.max_abs_v, "max_abs_a": meas.max_abs_a, "max_abs_j": meas.max_abs_j}
-
-
-def _limits(machine) -> dict:
-    return {a.name: {"v_max": a.v_max, "a_max": a.a_max, "j_max": a.j_max} for a in machine.axes}
-
-
-def plan_program_file(input_path: Path, machine, out: Path, planner: str, progress, dialect) -> dict:
-    """Plan a contour program (G-code) and write its table; the report dict."""
-    from jaxcnc.hw.tablefile import TableFile
-    from jaxcnc.planners import plan_job
-    from jaxcnc.ticks.table import write_table
-    from jaxcnc.ticks.verify import measure_table
-
-    t0 = time.perf_counter()
-    program = _load_program(input_path, machine, dialect)
-    t_parse = time.perf_counter()
-    job = plan_job(program, machine, planner=planner)
-    t_plan = time.perf_counter()
-    write_table(job, out, progress=progress, planner=planner)
-    t_ticks = time.perf_counter()
-    meas = measure_table(TableFile(out), machine)
-    t_check = time.perf_counter()
-    return {
-        "input": str(input_path),
-        "machine": machine.name,
-        "table": str(out),
-        "planner": planner,
-        "total_time_s": job.plan.total_time_s,
-        "n_blocks": program.n_blocks,
-        "n_spans": len(job.spans),
-        "n_ticks": job.plan.n_ticks + 1,
-        "tick_hz": machine.tick_hz,
-        "path_length_mm": job.path_length_mm,
-        "plan_wall_s": t_ticks - t0,
-        "timings_s": {
-            "parse": t_parse - t0,
-            "plan": t_plan - t_parse,
-            "ticks": t_ticks - t_plan,
-            "verify": t_check - t_ticks,
-        },
-        **_measured(meas),
-        "limits": _limits(machine),
-        "violations": [str(v) for v in meas.violations],
-    }
-
-
-def plan_points_file(
-    input_path: Path, machine, out: Path, planner: str | None, progress, dialect, reorder: bool
-) -> dict:
-    """Plan a point-by-point pulsed job and write its table; the report dict (with the comparisons)."""
-    from jaxcnc.hw.tablefile import TableFile
-    from jaxcnc.planners.pulsed import DEFAULT_PULSE_PLANNER, plan_points
-    from jaxcnc.planners.pulsed.reorder import serpentine_order
-    from jaxcnc.ticks.pulses import write_pulse_table
-    from jaxcnc.ticks.verify import measure_table
-    from jaxcnc.ticks.verify_pulses import check_pulses
-
-    planner = planner or DEFAULT_PULSE_PLANNER
-    t0 = time.perf_counter()
-    given = load_point_job(input_path, machine, dialect)
-    t_parse = time.perf_counter()
-    job = given.take(serpentine_order(given.points)) if reorder else given
-    planned = plan_points(job, machine, planner)
-    t_plan = time.perf_counter()
-    write_pulse_table(planned, out, progress=progress)
-    t_ticks = time.perf_counter()
-    table = TableFile(out)
-    meas = measure_table(table, machine)
-    pulses = check_pulses(table, machine, given)
-    t_check = time.perf_counter()
-    plan = planned.plan
-    old = plan_points(job, machine, "stop-and-go").plan if planner != "stop-and-go" else plan
-    report = {
-        "input": str(input_path),
-        "machine": machine.name,
-        "table": str(out),
-        "planner": planner,
-        "n_points": len(job),
-        "n_pulses": plan.n_pulses,
-        "n_idle_pulses": int(plan.idle_tick.shape[0]),
-        "total_time_s": plan.trajectory.total_time_s,
-        "burn_time_s": plan.burn_time_s,
-        "lower_bound_s": planned.lower_bound_s,
-        "stop_and_go_s": old.burn_time_s,
-        "ratio_to_lower_bound": plan.burn_time_s / planned.lower_bound_s if planned.lower_bound_s > 0 else None,
-        "reduction_vs_stop_and_go": 1.0 - plan.burn_time_s / old.burn_time_s if old.burn_time_s > 0 else 0.0,
-        "n_ticks": plan.trajectory.n_ticks + 1,
-        "tick_hz": machine.tick_hz,
-        "pulse_hz": planned.window.pulse_hz,
-        "pulse_window_ticks": [planned.window.n_min, planned.window.n_max],
-        "path_length_mm": float(np.sum(np.linalg.norm(np.diff(job.points, axis=0), axis=1))),
-        "plan_wall_s": t_ticks - t0,
-        "timings_s": {
-            "parse": t_parse - t0,
-            "plan": planned.plan_wall_s,
-            "ticks": t_ticks - t_plan,
-            "verify": t_check - t_ticks,
-        },
-        "planner_stats": plan.stats,
-        **_measured(meas),
-        "max_miss_mm": pulses.max_miss_mm,
-        "limits": _limits(machine),
-        "violations": [str(v) for v in meas.violations + pulses.violations],
-    }
-    if reorder:
-        report["as_given_burn_time_s"] = plan_points(given, machine, planner).plan.burn_time_s
-    return report
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -238,67 +63,20 @@ def cmd_plan(args: argparse.Namespace) -> int:
         )
         print(
             f"  measured on the table: max |v| {_fmt_axes(report['max_abs_v'], 'mm/s')}; "
-            f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}"
+            f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}; at most "
+            f"{report['max_path_deviation_mm'] * 1e3:.3g} µm from the programmed path "
+            f"(tolerance {report['path_tolerance_mm'] * 1e3:.3g} µm)"
         )
     if report["violations"]:
         for line in report["violations"][:50]:
             print(f"violation: {line}", file=sys.stderr)
         print(
-            "jaxcnc: error: the planned table breaks the machine limits or pulse windows (a planner bug; "
-            "please report it)",
+            "jaxcnc: error: the planned table breaks the machine limits, the path tolerance or the pulse windows "
+            "(a planner bug; please report it)",
             file=sys.stderr,
         )
         return 1
     return 0
-
-
-def check_table(
-    table_path: Path,
-    machine_path: Path,
-    points: Path | None = None,
-    program: Path | None = None,
-    dialect: str | None = None,
-):
-    """Verify a table: checksums, limits, travel, the path and, for pulsed tables, pulses. ``(table, measurement)``.
-
-    The measurement's violations include the pulse and path problems; its ``pulses`` attribute holds the
-    pulse check (``None`` for tables without work pulses), ``path`` the distances from the programmed
-    path (``None`` when not compared; ``path_note`` says why: no G-code source, or it is not here).
-    """
-    from jaxcnc.hw.tablefile import EventKind, TableFile
-    from jaxcnc.machine import load_machine
-    from jaxcnc.ticks.deviation import path_deviation, program_for_table
-    from jaxcnc.ticks.verify import measure_table
-
-    machine = load_machine(machine_path)
-    table = TableFile(table_path)  # verifies every checksum
-    meas = measure_table(table, machine)
-    if np.any(table.events["kind"] == EventKind.WORK_PULSE):
-        from jaxcnc.ticks.verify_pulses import check_pulses
-
-        job = _points_of_table(table, machine, points)
-        meas.pulses = check_pulses(table, machine, job)
-        meas.violations.extend(meas.pulses.violations)
-    prog, meas.path_note = program_for_table(table, machine, GCODE_SUFFIXES, program, dialect)
-    if prog is not None:
-        meas.path = path_deviation(table, machine, prog)
-        meas.violations.extend(meas.path.violations)
-    return table, meas
-
-
-def _points_of_table(table, machine, points: Path | None):
-    from jaxcnc.hw.tablefile import file_sha256
-
-    meta = table.header.meta
-    source = Path(points) if points else Path(str(meta.get("source", "")))
-    if not source.is_file():
-        raise JaxcncError(
-            f"{table.path}: the table burns points from {str(source)!r}, which is not here; pass --points FILE"
-        )
-    if points is None and meta.get("source_sha256"):
-        if file_sha256(source) != meta["source_sha256"]:
-            raise JaxcncError(f"{source}: changed since the table was planned (checksum differs); pass --points FILE")
-    return load_point_job(source, machine)
 
 
 def _path_line(meas) -> str:
@@ -486,8 +264,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from jaxcnc.bench.plan import run_benchmarks
     from jaxcnc.bench.player import run_player_benchmarks
 
+    results: dict = {}
     if args.suite in ("all", "plan"):
-        run_benchmarks(n_blocks=args.blocks, repeats=args.repeats)
+        sizes = tuple(args.sizes) if args.sizes else None
+        results["plan"] = run_benchmarks(
+            n_blocks=args.blocks, repeats=args.repeats, baseline=args.baseline, **({"sizes": sizes} if sizes else {})
+        )
+    if args.suite in ("all", "corners"):
+        from jaxcnc.bench.corners import run_corner_benchmarks
+
+        results["corners"] = run_corner_benchmarks(peers=args.peers, repeats=args.repeats)
     if args.suite in ("all", "geometry"):
         run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
     if args.suite in ("all", "player"):
@@ -499,7 +285,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.suite in ("all", "pulsed"):
         from jaxcnc.bench.pulsed import run_pulsed_benchmarks
 
-        run_pulsed_benchmarks(programs=args.programs, check=args.check)
+        results["pulsed"] = run_pulsed_benchmarks(programs=args.programs, check=args.check)
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
 
 
@@ -630,14 +418,33 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser(
         "bench",
-        help="benchmarks: planning and tick throughput against baselines",
-        description="plan: a synthetic program of 50-150 um line blocks; blocks/s and ticks/s, the look-ahead "
-        "against sequential Python and NumPy. geometry: NURBS evaluation against scipy and geomdl, tick "
-        "generation on curves. player: table playback into sim and the TCP receiver. pulsed: the documents' "
-        "14 engraving programs under stop-and-go, the documents' method and jaxcnc's. Peers run in the same "
-        "process; JIT compile time is reported apart.",
+        help="benchmarks: planning and tick throughput, cycle times against peers",
+        description="plan: a CAM contour of 1k-1M blocks with exact and blended corners (each size in a fresh "
+        "process: first call, steady wall/CPU min/median, blocks/s, peak memory; --baseline REV measures a git "
+        "revision beside), the look-ahead against sequential Python and NumPy, ticks/s. corners: the peers' "
+        "programs (shared/peers) and the programs of benchmarks/programs beside Klipper's and LinuxCNC's "
+        "planned times, every table checked at the tick rate against limits and the programmed path. geometry: "
+        "NURBS evaluation against scipy and geomdl, tick generation on curves. player: table playback into sim "
+        "and the TCP receiver. planners: topp beside CasADi and toppra on the butterfly. pulsed: the documents' "
+        "14 engraving programs. Every run prints the date, the commit and the load average; JIT compile time "
+        "is reported apart. A missing input is an error (exit 2), never replaced by another.",
     )
-    sp.add_argument("--blocks", type=int, default=100_000, help="synthetic program size (default: %(default)s)")
+    sp.add_argument(
+        "--blocks", type=int, default=100_000, help="look-ahead and tick program size (default: %(default)s)"
+    )
+    sp.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        help="plan: the scaling table's program sizes (default: 1000 10000 100000 1000000)",
+    )
+    sp.add_argument(
+        "--baseline", help="plan: measure the scaling table on this git revision too (a worktree of this checkout)"
+    )
+    sp.add_argument(
+        "--peers", help="corners: the peers' folder (README.md, programs/, machines/; default: shared/peers)"
+    )
+    sp.add_argument("--json", help="also write the figures as JSON to this file")
     sp.add_argument("--repeats", type=int, default=5, help="steady-state repetitions (default: %(default)s)")
     sp.add_argument("--points", type=int, default=1_000_000, help="NURBS evaluation points (default: %(default)s)")
     sp.add_argument("--seconds", type=float, default=60.0, help="player: table length in s (default: %(default)s)")
@@ -651,7 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "geometry", "player", "planners", "pulsed"),
+        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed"),
         help="which benchmarks (default: %(default)s)",
     )
     sp.set_defaults(func=cmd_bench)

@@ -1,0 +1,300 @@
+"""Jobs: any supported input, planned on a machine into a verified table, with its report.
+
+This is what ``jaxcnc plan`` and ``jaxcnc check`` do, as a library: the command line only parses its
+arguments and prints. The input's type comes from its suffix — G-code (``GCODE_SUFFIXES``) or a point
+file for pulsed engraving (``POINT_SUFFIXES``); G-code on a machine whose laser is pulsed is a point
+job too (every G1 end point burned by one pulse). A job goes through four stages — parse, plan, ticks,
+verify — shown by a progress bar on a terminal; verification is independent of the planner: the
+table's limits at every tick (:mod:`jaxcnc.ticks.verify`), every tick's distance from the programmed
+path (:mod:`jaxcnc.ticks.deviation`) and, for pulsed jobs, the pulses (:mod:`jaxcnc.ticks.verify_pulses`).
+
+>>> report = plan_file("part.ngc", "machine.toml", "part.ticks")   # doctest: +SKIP
+>>> report["total_time_s"], report["violations"]                     # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from jaxcnc.errors import JaxcncError
+from jaxcnc.machine import MachineConfig, load_machine
+
+GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
+POINT_SUFFIXES = (".xyz", ".csv")
+LATER_SUFFIXES = {".dxf": "DXF", ".stl": "STL"}
+STAGES = ("parse", "plan", "ticks", "verify")
+
+
+class Stages:
+    """Times the stages of a job and shows them as a progress bar (``progress``: ``None`` = on a terminal)."""
+
+    def __init__(self, progress: bool | None, label: str):
+        from tqdm.auto import tqdm
+
+        self.seconds: dict[str, float] = {}
+        self._bar = tqdm(
+            total=len(STAGES), desc=label, unit="stage", leave=False, disable=progress is False if progress is not None
+            else None, bar_format="{desc}: {n_fmt}/{total_fmt} stages [{elapsed}] {postfix}",
+        )  # fmt: skip
+
+    @contextmanager
+    def stage(self, name: str):
+        self._bar.set_postfix_str(name)
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] = time.perf_counter() - t0
+            self._bar.update(1)
+
+    def close(self) -> None:
+        self._bar.close()
+
+
+def _machine(machine: MachineConfig | str | Path) -> MachineConfig:
+    return machine if isinstance(machine, MachineConfig) else load_machine(machine)
+
+
+def load_program(path: str | Path, machine: MachineConfig, dialect: str | None = None):
+    """A G-code program as a :class:`~jaxcnc.program.Program`, starting where the machine is homed."""
+    from jaxcnc.gcode import load_gcode
+    from jaxcnc.planners import program_start
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in LATER_SUFFIXES:
+        raise JaxcncError(f"{path}: {LATER_SUFFIXES[suffix]} input is not supported yet")
+    if suffix not in GCODE_SUFFIXES:
+        raise JaxcncError(
+            f"{path}: unknown input type {suffix!r}; G-code files end in {', '.join(GCODE_SUFFIXES)}, "
+            f"point files in {', '.join(POINT_SUFFIXES)}"
+        )
+    start = program_start(machine)
+    return load_gcode(path, start=start, home=start, dialect=dialect)
+
+
+def is_point_job(input_path: str | Path, machine: MachineConfig) -> bool:
+    """Point-by-point pulsed engraving: a point file, or G-code on a machine whose laser is pulsed."""
+    input_path = Path(input_path)
+    if input_path.suffix.lower() in POINT_SUFFIXES:
+        if machine.laser.mode != "pulsed":
+            raise JaxcncError(
+                f'{input_path}: point files are burned point by point, which needs [laser] mode = "pulsed" '
+                f"(machine {machine.name!r} has mode {machine.laser.mode!r})"
+            )
+        return True
+    return machine.laser.mode == "pulsed"
+
+
+def load_point_job(input_path: str | Path, machine: MachineConfig, dialect: str | None = None):
+    """The points of a point job: read from a point file, or the G1 end points of a program."""
+    from jaxcnc.io.points import points_from_program, read_points
+
+    input_path = Path(input_path)
+    if input_path.suffix.lower() in POINT_SUFFIXES:
+        return read_points(input_path)
+    return points_from_program(load_program(input_path, machine, dialect))
+
+
+def plan_file(
+    input_path: str | Path,
+    machine: MachineConfig | str | Path,
+    out: str | Path,
+    planner: str | None = None,
+    progress: bool | None = None,
+    dialect: str | None = None,
+    reorder: bool = False,
+) -> dict:
+    """Plan ``input_path`` on the machine, write and verify the table at ``out``; the report dict."""
+    machine = _machine(machine)
+    if is_point_job(input_path, machine):
+        return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
+    if reorder:
+        raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
+    from jaxcnc.planners.registry import DEFAULT_PLANNER
+
+    return plan_program_file(input_path, machine, out, planner or DEFAULT_PLANNER, progress, dialect)
+
+
+def measured(meas) -> dict:
+    """Per-axis maxima measured on a table, for a report."""
+    return {"max_abs_v": meas.max_abs_v, "max_abs_a": meas.max_abs_a, "max_abs_j": meas.max_abs_j}
+
+
+def limits(machine: MachineConfig) -> dict:
+    """The machine's per-axis limits, for a report."""
+    return {a.name: {"v_max": a.v_max, "a_max": a.a_max, "j_max": a.j_max} for a in machine.axes}
+
+
+def plan_program_file(
+    input_path: str | Path,
+    machine: MachineConfig,
+    out: str | Path,
+    planner: str,
+    progress: bool | None = None,
+    dialect: str | None = None,
+) -> dict:
+    """Plan a contour program (G-code), write its table and verify it (limits, the path); the report."""
+    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.planners import plan_job
+    from jaxcnc.ticks.deviation import path_deviation
+    from jaxcnc.ticks.table import write_table
+    from jaxcnc.ticks.verify import measure_table
+
+    st = Stages(progress, f"planning {Path(input_path).name}")
+    try:
+        with st.stage("parse"):
+            program = load_program(input_path, machine, dialect)
+        with st.stage("plan"):
+            job = plan_job(program, machine, planner=planner)
+        with st.stage("ticks"):
+            write_table(job, out, progress=progress, planner=planner)
+        with st.stage("verify"):
+            table = TableFile(out)
+            meas = measure_table(table, machine)
+            path = path_deviation(table, machine, program)
+    finally:
+        st.close()
+    t = st.seconds
+    return {
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": planner,
+        "total_time_s": job.plan.total_time_s,
+        "n_blocks": program.n_blocks,
+        "n_spans": len(job.spans),
+        "n_ticks": job.plan.n_ticks + 1,
+        "tick_hz": machine.tick_hz,
+        "path_length_mm": job.path_length_mm,
+        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
+        "timings_s": dict(t),
+        **measured(meas),
+        "max_path_deviation_mm": path.max_mm,
+        "path_tolerance_mm": path.max_tol_mm,
+        "limits": limits(machine),
+        "violations": [str(v) for v in meas.violations + path.violations],
+    }
+
+
+def plan_points_file(
+    input_path: str | Path,
+    machine: MachineConfig,
+    out: str | Path,
+    planner: str | None = None,
+    progress: bool | None = None,
+    dialect: str | None = None,
+    reorder: bool = False,
+) -> dict:
+    """Plan a point-by-point pulsed job, write its table and verify it; the report (with the comparisons)."""
+    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.planners.pulsed import DEFAULT_PULSE_PLANNER, plan_points
+    from jaxcnc.planners.pulsed.reorder import serpentine_order
+    from jaxcnc.ticks.pulses import write_pulse_table
+    from jaxcnc.ticks.verify import measure_table
+    from jaxcnc.ticks.verify_pulses import check_pulses
+
+    planner = planner or DEFAULT_PULSE_PLANNER
+    st = Stages(progress, f"planning {Path(input_path).name}")
+    try:
+        with st.stage("parse"):
+            given = load_point_job(input_path, machine, dialect)
+        with st.stage("plan"):
+            job = given.take(serpentine_order(given.points)) if reorder else given
+            planned = plan_points(job, machine, planner)
+        with st.stage("ticks"):
+            write_pulse_table(planned, out, progress=progress)
+        with st.stage("verify"):
+            table = TableFile(out)
+            meas = measure_table(table, machine)
+            pulses = check_pulses(table, machine, given)
+    finally:
+        st.close()
+    t = st.seconds
+    plan = planned.plan
+    old = plan_points(job, machine, "stop-and-go").plan if planner != "stop-and-go" else plan
+    report = {
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": planner,
+        "n_points": len(job),
+        "n_pulses": plan.n_pulses,
+        "n_idle_pulses": int(plan.idle_tick.shape[0]),
+        "total_time_s": plan.trajectory.total_time_s,
+        "burn_time_s": plan.burn_time_s,
+        "lower_bound_s": planned.lower_bound_s,
+        "stop_and_go_s": old.burn_time_s,
+        "ratio_to_lower_bound": plan.burn_time_s / planned.lower_bound_s if planned.lower_bound_s > 0 else None,
+        "reduction_vs_stop_and_go": 1.0 - plan.burn_time_s / old.burn_time_s if old.burn_time_s > 0 else 0.0,
+        "n_ticks": plan.trajectory.n_ticks + 1,
+        "tick_hz": machine.tick_hz,
+        "pulse_hz": planned.window.pulse_hz,
+        "pulse_window_ticks": [planned.window.n_min, planned.window.n_max],
+        "path_length_mm": float(np.sum(np.linalg.norm(np.diff(job.points, axis=0), axis=1))),
+        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
+        "timings_s": {**t, "plan": planned.plan_wall_s},
+        "planner_stats": plan.stats,
+        **measured(meas),
+        "max_miss_mm": pulses.max_miss_mm,
+        "limits": limits(machine),
+        "violations": [str(v) for v in meas.violations + pulses.violations],
+    }
+    if reorder:
+        report["as_given_burn_time_s"] = plan_points(given, machine, planner).plan.burn_time_s
+    return report
+
+
+def check_table(
+    table_path: str | Path,
+    machine: MachineConfig | str | Path,
+    points: str | Path | None = None,
+    program: str | Path | None = None,
+    dialect: str | None = None,
+):
+    """Verify a table: checksums, limits, travel, the path and, for pulsed tables, pulses. ``(table, measurement)``.
+
+    The measurement's violations include the pulse and path problems; its ``pulses`` attribute holds the
+    pulse check (``None`` for tables without work pulses), ``path`` the distances from the programmed
+    path (``None`` when not compared; ``path_note`` says why: no G-code source, or it is not here).
+    """
+    from jaxcnc.hw.tablefile import EventKind, TableFile
+    from jaxcnc.ticks.deviation import path_deviation, program_for_table
+    from jaxcnc.ticks.verify import measure_table
+
+    machine = _machine(machine)
+    table = TableFile(table_path)  # verifies every checksum
+    meas = measure_table(table, machine)
+    if np.any(table.events["kind"] == EventKind.WORK_PULSE):
+        from jaxcnc.ticks.verify_pulses import check_pulses
+
+        job = points_of_table(table, machine, points)
+        meas.pulses = check_pulses(table, machine, job)
+        meas.violations.extend(meas.pulses.violations)
+    prog, meas.path_note = program_for_table(
+        table, machine, GCODE_SUFFIXES, Path(program) if program else None, dialect
+    )
+    if prog is not None:
+        meas.path = path_deviation(table, machine, prog)
+        meas.violations.extend(meas.path.violations)
+    return table, meas
+
+
+def points_of_table(table, machine: MachineConfig, points: str | Path | None):
+    """The point job a pulsed table burns: ``points`` or the table's source, checked unchanged."""
+    from jaxcnc.hw.tablefile import file_sha256
+
+    meta = table.header.meta
+    source = Path(points) if points else Path(str(meta.get("source", "")))
+    if not source.is_file():
+        raise JaxcncError(
+            f"{table.path}: the table burns points from {str(source)!r}, which is not here; pass --points FILE"
+        )
+    if points is None and meta.get("source_sha256"):
+        if file_sha256(source) != meta["source_sha256"]:
+            raise JaxcncError(f"{source}: changed since the table was planned (checksum differs); pass --points FILE")
+    return load_point_job(source, machine)
