@@ -88,13 +88,14 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     return np.linalg.norm(p - (a[:, None] + t[..., None] * ab[:, None]), axis=2)
 
 
-def _piece_distance(p: np.ndarray, spans: Spans, idx: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray) -> np.ndarray:
+def _piece_distance(
+    p: np.ndarray, spans: Spans, arrays: dict, idx: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray
+) -> np.ndarray:
     """Distance from ``p`` ``(J, Q, 3)`` to the part ``[s_lo, s_hi]`` of spans ``idx`` (lines and arcs).
 
     On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
     on a circle; an upper bound on a helix, whose tiny parts barely rise).
     """
-    arrays = span_arrays(spans)
     a = evaluate_path(arrays, idx, s_lo)[0]
     b = evaluate_path(arrays, idx, s_hi)[0]
     out = _segment_distance(p, a, b)
@@ -162,12 +163,13 @@ def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray
     above them by at most ``max|P''| h²/8`` — and peaks where the two are equal: there the crossing
     is found by bisection between the samples that bracket it and measured.
     """
-    start = evaluate_path(span_arrays(spans), i, spans.length[i] - ell_a)[0][:, None]
+    arrays = span_arrays(spans)
+    start = evaluate_path(arrays, i, spans.length[i] - ell_a)[0][:, None]
 
     def dist(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = poly.bezier_derivatives(coeffs, u, 0)[0] + start  # the blend is relative to A
-        d_in = _piece_distance(p, spans, i, spans.length[i] - ell_a, spans.length[i])
-        return d_in, _piece_distance(p, spans, i + 1, np.zeros_like(ell_b), ell_b)
+        d_in = _piece_distance(p, spans, arrays, i, spans.length[i] - ell_a, spans.length[i])
+        return d_in, _piece_distance(p, spans, arrays, i + 1, np.zeros_like(ell_b), ell_b)
 
     u = np.broadcast_to(np.linspace(0.0, 1.0, N_DEVIATION), (i.size, N_DEVIATION))
     d_in, d_out = dist(u)
@@ -181,7 +183,7 @@ def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray
     k = np.argmax(change, axis=1)
     lo, hi = u[np.arange(i.size), k].copy(), u[np.arange(i.size), k + 1].copy()
     lo_side = side[np.arange(i.size), k]
-    for _ in range(40):
+    for _ in range(30):  # 2^-30 of the blend's parameter
         mid = (lo + hi) / 2
         a, b = dist(mid[:, None])
         same = (a[:, 0] < b[:, 0]) == lo_side

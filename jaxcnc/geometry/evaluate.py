@@ -74,12 +74,15 @@ def _horner(c, x, order: int, xp):
     return d
 
 
-def _rational(c, item, u, order: int, xp) -> list:
+def _rational(c, item, u, order: int, xp, polynomial: bool = False) -> list:
     """Per coordinate: ``[P_i - o_i, P_i', ...]`` of rational Bézier pieces ``item`` at ``u`` (quotient rule).
 
-    ``c``: ``(p+1, 4, n)`` homogeneous power-basis coefficients in column layout.
+    ``c``: ``(p+1, 4, n)`` homogeneous power-basis coefficients in column layout. ``polynomial``: every
+    weight is 1 (blends), so ``P = N`` and the quotient rule is skipped.
     """
     deg = c.shape[0] - 1
+    if polynomial:
+        return [_horner([c[k, comp][item] for k in range(deg + 1)], u, order, xp) for comp in range(3)]
     h = [_horner([c[k, comp][item] for k in range(deg + 1)], u, order, xp) for comp in range(4)]
     w = h[3]
     out = []
@@ -98,7 +101,7 @@ def _rational(c, item, u, order: int, xp) -> list:
     return out
 
 
-def _poly(a: dict, span, s, order: int, xp):
+def _poly(a: dict, span, s, order: int, xp, polynomial: bool = False):
     """Per coordinate ``i``: ``[q_i - o_i, q_i', ...]`` on polynomial spans."""
     q = a["poly_timing"].shape[-1]
     item = xp.clip(a["item"][span], 0, q - 1)
@@ -109,7 +112,7 @@ def _poly(a: dict, span, s, order: int, xp):
     v = _horner([t[k][item] for k in range(6)], sigma, order, xp)
     vs = [None] + [v[r] / safe**r for r in range(1, order + 1)]  # d^r u / ds^r
     out = []
-    for p in _rational(a["poly_coeffs"], item, v[0], order, xp):
+    for p in _rational(a["poly_coeffs"], item, v[0], order, xp, polynomial):
         d = [p[0]]
         if order >= 1:
             d.append(p[1] * vs[1])
@@ -148,13 +151,16 @@ def _arc(a: dict, span, s, order: int, xp):
     return out
 
 
-def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, poly_only: bool = False) -> tuple:
+def evaluate_path(
+    a: dict, span, s, order: int = 0, xp: ModuleType = np, poly_only: bool = False, polynomial: bool = False
+) -> tuple:
     """Position and derivatives in ``s`` of span ``span[i]`` at ``s[i]`` mm from its start.
 
     Args:
         a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm.
         order: highest derivative (0..4).
-        poly_only: every queried span is a polynomial span (skips the other kinds' formulas).
+        poly_only: every queried span is a polynomial span (skips the other kinds' formulas);
+            ``polynomial``: and its weights are all 1 (blends: skips the quotient rule).
     Returns:
         ``(q, q', ..., q^(order))``, each ``(m, 3)``: mm, then per mm of path parameter.
     """
@@ -165,7 +171,7 @@ def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, poly_on
     line = kind == SpanKind.LINE
     arc = kind == SpanKind.ARC
     poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
-    polys = _poly(a, span, s, order, xp) if a["poly_timing"].shape[-1] else None
+    polys = _poly(a, span, s, order, xp, polynomial) if a["poly_timing"].shape[-1] else None
     arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] and not poly_only else None
     zero = xp.zeros_like(s)
     cols = [[] for _ in range(order + 1)]

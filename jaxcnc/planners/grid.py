@@ -137,7 +137,8 @@ def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray)
     where = (s0[:, None] + delta[:, None] * frac[None, :]).ravel()
     spans = jnp.repeat(span, BOX_SAMPLES)
     _, t, k, d3, d4 = (
-        d.reshape(span.shape[0], BOX_SAMPLES, 3) for d in evaluate_path(arrays, spans, where, 4, jnp, True)
+        d.reshape(span.shape[0], BOX_SAMPLES, 3)
+        for d in evaluate_path(arrays, spans, where, 4, jnp, poly_only=True, polynomial=True)
     )
     h2 = (BOX_SAFETY * (delta / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
     t_pad = jnp.max(jnp.abs(d3), axis=1) * h2
