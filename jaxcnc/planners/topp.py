@@ -35,6 +35,7 @@ from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, 
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
+from jaxcnc.planners.trapezoid import plan_lookahead
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -163,6 +164,10 @@ def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarra
 def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
     spans = req.spans
+    if not is_curved(spans.kind).any() and (req.hold_caps is None or len(req.hold_caps) == 0):
+        # lines only: one interval per line, where the rows reduce to the look-ahead planner's span caps
+        # and junction caps — the same plan from span arrays alone, without a grid
+        return plan_lookahead(req)
     counts = hold_counts(req, interval_counts(spans))
     arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all rounds
     for _ in range(MAX_REFINE):
