@@ -157,12 +157,14 @@ def evaluate_path(
     """Position and derivatives in ``s`` of span ``span[i]`` at ``s[i]`` mm from its start.
 
     Args:
-        a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm.
+        a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm (or any
+            shapes that broadcast: span ``(m, 1)`` with s ``(m, k)`` reads each span's fields once).
         order: highest derivative (0..4).
         poly_only: every queried span is a polynomial span (skips the other kinds' formulas);
             ``polynomial``: and its weights are all 1 (blends: skips the quotient rule).
     Returns:
-        ``(q, q', ..., q^(order))``, each ``(m, 3)``: mm, then per mm of path parameter.
+        ``(q, q', ..., q^(order))``, each ``(m, 3)`` (the broadcast shape, then 3): mm, then per mm of
+        path parameter.
     """
     if not 0 <= order <= 4:
         raise ValueError("order must be 0 to 4")
@@ -188,7 +190,7 @@ def evaluate_path(
             val = [xp.where(arc, arcs[i][r], val[r]) for r in range(order + 1)]
         for r in range(order + 1):
             cols[r].append(val[r])
-    return tuple(xp.stack(c, axis=1) for c in cols)
+    return tuple(xp.stack(c, axis=-1) for c in cols)
 
 
 def evaluate_bezier(coeffs_t, origin_t, seg, u, order: int = 0, xp: ModuleType = np) -> tuple:

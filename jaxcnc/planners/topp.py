@@ -85,12 +85,16 @@ def jerk_cap(k_a: jnp.ndarray, k_b: jnp.ndarray, delta: jnp.ndarray, j_max: jnp.
     return jnp.min(x, axis=1)
 
 
-@partial(jax.jit, static_argnames=("curved_any",))
-def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: bool, j_max=None):
+@partial(jax.jit, static_argnames=("curved_any", "axes"))
+def plan_grid(
+    g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: bool, axes: tuple[int, ...] = (0, 1, 2), j_max=None
+):
     """The planner as one array program over ``m`` (padded) intervals; see the module docstring.
 
     ``g`` holds the grid (``span, delta, t_a, k_a, t_b, k_b, curved, feed, dwell``), ``sp`` the span
-    arrays the junctions need (``kind, tangent_in, tangent_out, stop_before``).
+    arrays the junctions need (``kind, tangent_in, tangent_out, stop_before``). ``axes``: the axes
+    whose acceleration rows can bind (finite limit, some motion): the others' rows are ``0 ≤ A`` and
+    are left out (a planar program on a three-axis machine has two thirds of the rows).
     """
     at_kink, j_cap = junctions(sp["kind"], sp["tangent_in"], sp["tangent_out"], sp["stop_before"], a_max, tick_hz)
     span, curved = g["span"], g["curved"]
@@ -118,7 +122,10 @@ def plan_grid(g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: b
         cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
     delta = g["delta"]
     box = (g["boxed"], g["t_lo"], g["t_hi"], g["k_lo"], g["k_hi"])
-    rows = constraint_rows(delta, g["t_a"], g["k_a"], g["t_b"], g["k_b"], acc, cap_b, box)
+    ax = list(axes)
+    box = (box[0],) + tuple(b[:, ax] for b in box[1:])
+    t_a, k_a, t_b, k_b = (g[f][:, ax] for f in ("t_a", "k_a", "t_b", "k_b"))
+    rows = constraint_rows(delta, t_a, k_a, t_b, k_b, acc[:, ax], cap_b, box)
     x_node = solve(rows, delta, cap_a, jnp.zeros(()), curved_any)
     x0, x1 = x_node[:-1], x_node[1:]
     # Lines: a trapezoid under the span's speed cap with the axes' tangential budget.
@@ -226,6 +233,14 @@ def _ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return which, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
 
 
+def moving_axes(grid: Grid, a_max: np.ndarray) -> tuple[int, ...]:
+    """The axes with a finite acceleration limit along which some interval moves or curves."""
+    moves = np.zeros(len(a_max), bool)
+    for f in (grid.t_a, grid.t_b, grid.k_a, grid.k_b, grid.t_lo, grid.t_hi, grid.k_lo, grid.k_hi):
+        moves |= np.any(f != 0, axis=0)
+    return tuple(int(i) for i in np.flatnonzero(moves & np.isfinite(a_max)))
+
+
 def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
     """Pad the grid to a bucket, run :func:`plan_grid`, return its outputs as NumPy arrays."""
     spans, machine = req.spans, req.machine
@@ -268,6 +283,7 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         machine.path.chord_tol_mm,
         machine.tick_hz,
         curved_any=bool(grid.curved.any()),
+        axes=moving_axes(grid, req.a_max),
         j_max=np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}
