@@ -139,7 +139,7 @@ def plan_program_file(
     dialect: str | None = None,
 ) -> dict:
     """Plan a contour program (G-code), write its table and verify it (limits, the path); the report."""
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
     from jaxcnc.planners import plan_job
     from jaxcnc.ticks.deviation import path_deviation
     from jaxcnc.ticks.table import write_table
@@ -191,7 +191,7 @@ def plan_points_file(
     reorder: bool = False,
 ) -> dict:
     """Plan a point-by-point pulsed job, write its table and verify it; the report (with the comparisons)."""
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
     from jaxcnc.planners.pulsed import DEFAULT_PULSE_PLANNER, plan_points
     from jaxcnc.planners.pulsed.reorder import serpentine_order
     from jaxcnc.ticks.pulses import write_pulse_table
@@ -262,7 +262,7 @@ def check_table(
     pulse check (``None`` for tables without work pulses), ``path`` the distances from the programmed
     path (``None`` when not compared; ``path_note`` says why: no G-code source, or it is not here).
     """
-    from jaxcnc.hw.tablefile import EventKind, TableFile
+    from jaxcnc.format import EventKind, TableFile
     from jaxcnc.ticks.deviation import path_deviation, program_for_table
     from jaxcnc.ticks.verify import measure_table
 
@@ -286,7 +286,7 @@ def check_table(
 
 def points_of_table(table, machine: MachineConfig, points: str | Path | None):
     """The point job a pulsed table burns: ``points`` or the table's source, checked unchanged."""
-    from jaxcnc.hw.tablefile import file_sha256
+    from jaxcnc.format import file_sha256
 
     meta = table.header.meta
     source = Path(points) if points else Path(str(meta.get("source", "")))

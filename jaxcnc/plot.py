@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from jaxcnc.hw.tablefile import EventKind, TableFile  # noqa: E402
+from jaxcnc.format import EventKind, TableFile  # noqa: E402
 from jaxcnc.machine import MachineConfig  # noqa: E402
 
 MAX_POINTS = 20000

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxcnc.format import TableFile
 from jaxcnc.gcode import parse_gcode
-from jaxcnc.hw.tablefile import TableFile
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners import PlannedJob, plan_job, program_start
 from jaxcnc.planners.registry import DEFAULT_PLANNER

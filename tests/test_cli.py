@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from jaxcnc.cli.main import main
-from jaxcnc.hw.tablefile import TableFile
+from jaxcnc.format import TableFile
 from tests.conftest import EXAMPLE_MACHINE, corpus_file, machine_text
 
 REPORT_KEYS = {

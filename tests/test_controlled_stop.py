@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 
+from jaxcnc.format import EventKind
 from jaxcnc.hw.player import Player
 from jaxcnc.hw.sinks.sim import SimSink
-from jaxcnc.hw.tablefile import EventKind
 from tests.conftest import machine_text, make_machine
 from tests.helpers import table_of
 

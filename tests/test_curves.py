@@ -205,7 +205,7 @@ def test_butterfly_ticks_at_constant_feed(tmp_path):
 
 
 def table_of_program(prog, machine, folder):
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
     from jaxcnc.planners import plan_job
     from jaxcnc.ticks.table import write_table
     from jaxcnc.ticks.verify import measure_table

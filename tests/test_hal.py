@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from jaxcnc.format import EventKind
 from jaxcnc.hw.player import play
 from jaxcnc.hw.sinks import open_sink
 from jaxcnc.hw.sinks.hal import HalStreamerSink, hal_available
-from jaxcnc.hw.tablefile import EventKind
 from tests.conftest import make_machine
 from tests.helpers import table_of
 

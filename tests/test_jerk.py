@@ -78,7 +78,7 @@ def test_casadi_reference_with_jerk_rows(tmp_path):
 
 def test_events_of_a_jerk_limited_job_fall_where_the_machine_rests(tmp_path):
     """Laser switching at G0/G1 changes and a dwell: each event on a tick where the drives stand still."""
-    from jaxcnc.hw.tablefile import EventKind
+    from jaxcnc.format import EventKind
 
     m = make_machine(a=1000, j=20_000)
     text = "G0 X5\nM3 S500\nG1 X15 F1200\nG4 P0.1\nG1 Y5\nM5\nG0 X0 Y0\nM2\n"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxcnc.hw.tablefile import EventKind
+from jaxcnc.format import EventKind
 from jaxcnc.machine import parse_machine
 from tests.conftest import machine_text
 from tests.helpers import table_of

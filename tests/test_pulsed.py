@@ -13,8 +13,8 @@ from scipy.interpolate import CubicSpline
 from jaxcnc.bench.pulsed import glass_engraver
 from jaxcnc.cli.main import main
 from jaxcnc.errors import JaxcncError, MachineFileError, SourceError
+from jaxcnc.format import EventKind, TableFile
 from jaxcnc.gcode import parse_gcode
-from jaxcnc.hw.tablefile import EventKind, TableFile
 from jaxcnc.io.points import PointJob, parse_points, points_from_program, read_points
 from jaxcnc.io.raster import superellipsoid_raster, write_xyz
 from jaxcnc.machine import parse_machine

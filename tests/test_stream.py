@@ -9,11 +9,11 @@ import sys
 import numpy as np
 import pytest
 
+from jaxcnc.format import TableFile, TableWriter
 from jaxcnc.hw.player import play
 from jaxcnc.hw.receiver import Receiver, spawn
 from jaxcnc.hw.sinks.stream import Faults, StreamSink
 from jaxcnc.hw.stream import ACK, DATA, HELLO, WELCOME, Frame, ProtocolError, decode
-from jaxcnc.hw.tablefile import TableFile, TableWriter
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxcnc.hw.tablefile import TableFile
+from jaxcnc.format import TableFile
 from tests.conftest import make_machine
 from tests.helpers import table_of
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from jaxcnc.errors import TableFileError
-from jaxcnc.hw.tablefile import EVENT_DTYPE, FINE_SCALE, TableFile, TableWriter
+from jaxcnc.format import EVENT_DTYPE, FINE_SCALE, TableFile, TableWriter
 
 
 def _write(path, pos, fine, events=None, block_rows=64, chunks=(7, 100, 1)):
@@ -131,7 +131,7 @@ def test_no_jax_on_the_player_side():
     import sys
 
     code = (
-        "import sys; import jaxcnc.hw.tablefile, jaxcnc.hw.player, jaxcnc.hw.sinks, jaxcnc.hw.sinks.stream, "
+        "import sys; import jaxcnc.format, jaxcnc.hw.player, jaxcnc.hw.sinks, jaxcnc.hw.sinks.stream, "
         "jaxcnc.hw.receiver, jaxcnc.hw.timewarp, jaxcnc.ticks.verify; "
         "print('jax' in sys.modules)"
     )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxcnc.hw.tablefile import FINE_SCALE, EventKind, TableWriter
+from jaxcnc.format import FINE_SCALE, EventKind, TableWriter
 from jaxcnc.ticks.sample import TickSampler
 from jaxcnc.ticks.verify import measure_table
 from tests.conftest import make_machine
@@ -91,7 +91,7 @@ def test_verify_flags_each_limit_with_tick_axis_value(tmp_path):
     m = make_machine(tick_hz=1000)
     with TableWriter(tmp_path / "v.ticks", axes=["x", "y", "z"], tick_hz=1000, discrete_mm=0.001, n_rows=n) as w:
         w.write(pos, np.zeros_like(pos))
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
 
     meas = measure_table(TableFile(tmp_path / "v.ticks"), m)
     text = [str(v) for v in meas.violations]
@@ -109,7 +109,7 @@ def test_verify_requires_rest_at_both_ends(tmp_path):
     pos[:, 0] = np.arange(n) * 50  # moving at 50 mm/s from the first row to the last
     with TableWriter(tmp_path / "m.ticks", axes=["x", "y", "z"], tick_hz=1000, discrete_mm=0.001, n_rows=n) as w:
         w.write(pos, np.zeros_like(pos))
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
 
     meas = measure_table(TableFile(tmp_path / "m.ticks"), make_machine(tick_hz=1000))
     bad = {(v.first_tick, v.quantity) for v in meas.violations if v.axis == "x"}
@@ -125,6 +125,6 @@ def test_jobs_are_plain_picklable_data(planned, tmp_path):
     job, table, _ = planned
     clone = pickle.loads(pickle.dumps(job))
     path = write_table(clone, tmp_path / "clone.ticks", progress=False)
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
 
     np.testing.assert_array_equal(TableFile(path).positions, table.positions)

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from jaxcnc.format import TableFile
 from jaxcnc.gcode import parse_gcode
 from jaxcnc.geometry import SpanKind, build_spans
-from jaxcnc.hw.tablefile import TableFile
 from jaxcnc.io.curves import curves_program
 from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.ticks.table import write_table

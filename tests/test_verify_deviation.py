@@ -14,8 +14,8 @@ from scipy.interpolate import BSpline
 
 from jaxcnc.cli.main import GCODE_SUFFIXES, main
 from jaxcnc.errors import JaxcncError
+from jaxcnc.format import FINE_SCALE, EventKind, TableFile, TableWriter, file_sha256
 from jaxcnc.gcode import parse_gcode
-from jaxcnc.hw.tablefile import FINE_SCALE, EventKind, TableFile, TableWriter, file_sha256
 from jaxcnc.ticks.deviation import (
     SLACK_MM,
     CurveDistance,

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxcnc.hw.tablefile import FINE_SCALE, TableFile, TableWriter
+from jaxcnc.format import FINE_SCALE, TableFile, TableWriter
 from jaxcnc.machine import MachineConfig
 from jaxcnc.ticks.verify import REL_SLACK, Measurement, TableRows, Violation, _runs, measure_table
 from tests.conftest import machine_text, make_machine

@@ -126,8 +126,8 @@ def own_programs_dir() -> Path | None:
 
 def plan_and_check(program_path: Path, machine: MachineConfig, folder: Path, repeats: int) -> dict:
     """Plan a program (timed), write its table, verify limits and the path; the figures as a dict."""
+    from jaxcnc.format import TableFile
     from jaxcnc.gcode import load_gcode
-    from jaxcnc.hw.tablefile import TableFile
     from jaxcnc.planners import plan_job, program_start
     from jaxcnc.ticks.deviation import path_deviation
     from jaxcnc.ticks.table import write_table

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.bench.programs import find_butterfly, random_cubic_nurbs
-from jaxcnc.hw.tablefile import TableFile
+from jaxcnc.format import TableFile
 from jaxcnc.io.curves import curves_program
 from jaxcnc.machine import MachineConfig, parse_machine
 from jaxcnc.planners import plan_job, register_planner

@@ -16,11 +16,11 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
     import tempfile
     from pathlib import Path
 
+    from jaxcnc.format import TableFile, TableWriter
     from jaxcnc.hw.player import play
     from jaxcnc.hw.receiver import spawn
     from jaxcnc.hw.sinks.sim import SimSink
     from jaxcnc.hw.sinks.stream import StreamSink
-    from jaxcnc.hw.tablefile import TableFile, TableWriter
 
     out: dict = {}
     print(f"jaxcnc bench (player): {seconds:g} s 3-axis tables")
@@ -40,7 +40,7 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
             # memory of a fresh process that opens (verifies) and plays the table into sim: anonymous memory
             # stays bounded; the memory-mapped file's pages are page cache the kernel can drop
             code = (
-                "import sys; from jaxcnc.hw.tablefile import TableFile; from jaxcnc.hw.player import play; "
+                "import sys; from jaxcnc.format import TableFile; from jaxcnc.hw.player import play; "
                 "from jaxcnc.hw.sinks.sim import SimSink; "
                 "play(TableFile(sys.argv[1]), SimSink(buffer_rows=65536, keep=False), chunk_rows=65536); "
                 "st = dict(l.split(':', 1) for l in open('/proc/self/status')); "

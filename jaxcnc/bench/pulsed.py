@@ -150,7 +150,7 @@ def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False
 
 def _check_tables(plans: dict, machine: MachineConfig) -> str:
     """Write each plan's table, verify limits and pulses; a short verdict."""
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
     from jaxcnc.ticks.pulses import write_pulse_table
     from jaxcnc.ticks.verify import measure_table
     from jaxcnc.ticks.verify_pulses import check_pulses

@@ -3,11 +3,16 @@
 A contract for scripts and pipelines: exit status 0 on success, 1 when a check finds
 violations, 2 for bad input (program, machine file, damaged table) — with one clear line
 naming the file, the place and the cause, never a traceback.
+
+``play`` needs NumPy alone: a controller installs ``jaxcnc`` without the planning stack. The
+commands that plan import it when they run; without it they say in one line which extra to
+install (exit 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import sys
 from contextlib import nullcontext
@@ -18,7 +23,54 @@ import numpy as np
 
 import jaxcnc
 from jaxcnc.errors import JaxcncError
-from jaxcnc.jobs import GCODE_SUFFIXES, check_table, plan_file  # noqa: F401  (GCODE_SUFFIXES: part of the CLI's API)
+
+#: The extra that installs the planning stack (``pip install 'jaxcnc[plan]'``); the core install is the player.
+PLAN_EXTRA = "plan"
+#: Top-level modules that only the planning extra installs: a command that finds one missing says so.
+PLAN_MODULES = frozenset({"jax", "jaxlib", "scipy", "matplotlib", "tqdm"})
+_JOB_API = ("GCODE_SUFFIXES", "check_table", "plan_file")
+
+
+def __getattr__(name: str):
+    """The Job API's names, part of this module's API, imported on first use (not by ``play``)."""
+    if name in _JOB_API:
+        import jaxcnc.jobs
+
+        return getattr(jaxcnc.jobs, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def missing_plan_extra(command: str, module: str) -> str:
+    """The one line said when ``command`` needs ``module`` of the planning extra and it is not installed."""
+    return (
+        f"'jaxcnc {command}' needs the planning extra, which is not installed (no module {module!r}): "
+        f"pip install 'jaxcnc[{PLAN_EXTRA}]'"
+    )
+
+
+class _NoBar:
+    """Stands in for tqdm's bar where tqdm is absent (a player-only install): nothing is drawn."""
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
+        pass
+
+    def write(self, s: str) -> None:
+        print(s)
+
+    def close(self) -> None:
+        pass
+
+
+def _progress_bar(**kwargs):
+    """tqdm's bar when tqdm is installed (it comes with the planning extra), else none."""
+    try:
+        from tqdm.auto import tqdm
+    except ModuleNotFoundError:
+        return _NoBar()
+    return tqdm(**kwargs)
 
 
 def _fmt_axes(d: dict[str, float], unit: str) -> str:
@@ -26,6 +78,8 @@ def _fmt_axes(d: dict[str, float], unit: str) -> str:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
+    from jaxcnc.jobs import plan_file
+
     report = plan_file(
         Path(args.input),
         Path(args.machine),
@@ -92,6 +146,8 @@ def _path_line(meas) -> str:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
+    from jaxcnc.jobs import check_table
+
     table, meas = check_table(
         Path(args.table),
         Path(args.machine),
@@ -129,12 +185,10 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_play(args: argparse.Namespace) -> int:
-    from tqdm.auto import tqdm
-
     from jaxcnc.cli.control import KEYS_HELP, operator_controls
+    from jaxcnc.format import TableFile
     from jaxcnc.hw.player import Player, sigint_stops
     from jaxcnc.hw.sinks import open_sink
-    from jaxcnc.hw.tablefile import TableFile
 
     table = TableFile(args.table)  # refuses a damaged file before anything moves
     a_max = None
@@ -152,7 +206,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     elif args.sink in ("halstreamer", "hal"):
         options = {"record": args.record}
     sink = open_sink(args.sink, **options)
-    bar = tqdm(total=table.n_rows, unit="tick", unit_scale=True, desc="playing", disable=args.quiet or None)
+    bar = _progress_bar(total=table.n_rows, unit="tick", unit_scale=True, desc="playing", disable=args.quiet or None)
     last = [0]
 
     def progress(done: int) -> None:
@@ -196,7 +250,7 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from jaxcnc.hw.tablefile import TableFile
+    from jaxcnc.format import TableFile
     from jaxcnc.machine import load_machine
     from jaxcnc.plot import plot_table
 
@@ -207,6 +261,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from jaxcnc.jobs import check_table, plan_file
     from jaxcnc.machine import load_machine
     from jaxcnc.plot import plot_table
 
@@ -260,12 +315,11 @@ def cmd_expand(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from jaxcnc.bench.geometry import run_geometry_benchmarks
-    from jaxcnc.bench.plan import run_benchmarks
-    from jaxcnc.bench.player import run_player_benchmarks
-
+    # each suite imports what it measures: 'bench player' runs in a player-only install
     results: dict = {}
     if args.suite in ("all", "plan"):
+        from jaxcnc.bench.plan import run_benchmarks
+
         sizes = tuple(args.sizes) if args.sizes else None
         results["plan"] = run_benchmarks(
             n_blocks=args.blocks, repeats=args.repeats, baseline=args.baseline, **({"sizes": sizes} if sizes else {})
@@ -275,8 +329,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         results["corners"] = run_corner_benchmarks(peers=args.peers, repeats=args.repeats)
     if args.suite in ("all", "geometry"):
+        from jaxcnc.bench.geometry import run_geometry_benchmarks
+
         run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
     if args.suite in ("all", "player"):
+        from jaxcnc.bench.player import run_player_benchmarks
+
         run_player_benchmarks(seconds=args.seconds)
     if args.suite in ("all", "planners"):
         from jaxcnc.bench.planners import run_planner_benchmarks
@@ -295,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="jaxcnc",
         description="Plan laser-machine motion ahead of time: G-code in, a verified tick table out.",
-        epilog="Start with 'jaxcnc demo'. Exit status: 0 ok, 1 limits violated / check failed, 2 bad input.",
+        epilog="Start with 'jaxcnc demo'. Exit status: 0 ok, 1 limits violated / check failed, 2 bad input. "
+        "'play' needs NumPy alone; plan, plot, demo and bench need the planning extra: pip install 'jaxcnc[plan]'.",
     )
     p.add_argument("--version", action="version", version=f"jaxcnc {jaxcnc.__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -328,7 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="G-code dialect: linuxcnc, siemens, fanuc, or a dialect TOML file (default: %(default)s)",
     )
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
-    sp.set_defaults(func=cmd_plan)
+    sp.set_defaults(func=cmd_plan, needs=("jax",))
 
     sp = sub.add_parser(
         "check",
@@ -392,7 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("table", help="table file")
     sp.add_argument("--output", "-o", required=True, help="PNG file to write")
     sp.add_argument("--machine", "-m", help="draw this machine's limits")
-    sp.set_defaults(func=cmd_plot)
+    sp.set_defaults(func=cmd_plot, needs=("matplotlib",))
 
     sp = sub.add_parser(
         "demo",
@@ -401,7 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
         "write a plot and print a summary. The first thing to run.",
     )
     sp.add_argument("--out", default="jaxcnc-demo", help="folder for the demo's files (default: %(default)s)")
-    sp.set_defaults(func=cmd_demo)
+    sp.set_defaults(func=cmd_demo, needs=("jax", "matplotlib"))
 
     sp = sub.add_parser(
         "expand",
@@ -467,10 +526,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    for module in getattr(args, "needs", ()):  # before anything is written
+        if importlib.util.find_spec(module) is None:
+            print(f"jaxcnc: error: {missing_plan_extra(args.command, module)}", file=sys.stderr)
+            return 2
     try:
         return args.func(args)
     except JaxcncError as exc:
         print(f"jaxcnc: error: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:  # a command (or an input it was given) that needs the planning stack
+        module = (exc.name or "").partition(".")[0]
+        if module not in PLAN_MODULES:
+            raise
+        print(f"jaxcnc: error: {missing_plan_extra(args.command, module)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("jaxcnc: interrupted", file=sys.stderr)

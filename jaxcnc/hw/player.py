@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jaxcnc.format import EVENT_DTYPE, EventKind, TableFile
 from jaxcnc.hw.sinks.base import Sink
-from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableFile
 from jaxcnc.hw.timewarp import TimeWarp
 
 

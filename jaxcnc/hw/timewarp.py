@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxcnc.hw.tablefile import TableFile
+from jaxcnc.format import TableFile
 
 SAFETY = 0.9
 

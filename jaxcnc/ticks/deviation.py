@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import JaxcncError
-from jaxcnc.hw.tablefile import EventKind, TableFile, file_sha256
+from jaxcnc.format import EventKind, TableFile, file_sha256
 from jaxcnc.machine import MachineConfig
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 from jaxcnc.ticks.verify import TableRows, Violation, _runs

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind
+from jaxcnc.format import EVENT_DTYPE, EventKind
 from jaxcnc.planners.smoothing import SmoothPlan
 from jaxcnc.planners.timelaw import Plan
 

@@ -18,7 +18,7 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
-from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind
+from jaxcnc.format import EVENT_DTYPE, EventKind
 from jaxcnc.planners.pulsed import PlannedPoints
 from jaxcnc.planners.pulsed.trajectory import Trajectory
 from jaxcnc.program import PROGRAM_AXES

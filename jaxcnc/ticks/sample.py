@@ -18,9 +18,9 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
+from jaxcnc.format import FINE_SCALE
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.spans import pad_spans
-from jaxcnc.hw.tablefile import FINE_SCALE
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.smoothing import SmoothPlan, positions_at_s, span_starts
 from jaxcnc.planners.timelaw import PLAN_KEYS, s_at, segment_of_tick

@@ -13,8 +13,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 import jaxcnc
+from jaxcnc.format import EVENT_DTYPE, EventKind, TableWriter, file_sha256
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.hw.tablefile import EVENT_DTYPE, EventKind, TableWriter, file_sha256
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.registry import DEFAULT_PLANNER

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from jaxcnc.errors import TableFileError
-from jaxcnc.hw.tablefile import FINE_SCALE, TableFile
+from jaxcnc.format import FINE_SCALE, TableFile
 from jaxcnc.machine import MachineConfig
 
 #: Relative slack for floating-point rounding when comparing with a limit.

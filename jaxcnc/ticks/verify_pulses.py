@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jaxcnc.hw.tablefile import FINE_SCALE, EventKind, TableFile
+from jaxcnc.format import FINE_SCALE, EventKind, TableFile
 from jaxcnc.io.points import PointJob
 from jaxcnc.machine import MachineConfig
 from jaxcnc.ticks.verify import Violation

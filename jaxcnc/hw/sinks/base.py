@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-from jaxcnc.hw.tablefile import TableHeader
+from jaxcnc.format import TableHeader
 
 
 class Sink(Protocol):

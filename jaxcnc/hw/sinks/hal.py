@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import JaxcncError
+from jaxcnc.format import EventKind, TableHeader
 from jaxcnc.hw.sinks.record import RowRecorder
-from jaxcnc.hw.tablefile import EventKind, TableHeader
 
 REALTIME = "/usr/lib/linuxcnc/realtime"
 TOOLS = ("halcmd", "halstreamer", "halsampler")

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from jaxcnc.format import TableHeader
 from jaxcnc.hw.sinks.record import RowRecorder
-from jaxcnc.hw.tablefile import TableHeader
 
 
 class ScannerSink:

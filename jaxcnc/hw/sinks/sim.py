@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxcnc.format import EVENT_DTYPE, TableHeader
 from jaxcnc.hw.drives import DriveClock
 from jaxcnc.hw.sinks.record import RowRecorder
-from jaxcnc.hw.tablefile import EVENT_DTYPE, TableHeader
 
 
 class SimSink:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jaxcnc.format import TableHeader
 from jaxcnc.hw.stream import (
     ACK,
     DATA,
@@ -29,7 +30,6 @@ from jaxcnc.hw.stream import (
     decode,
     parse_address,
 )
-from jaxcnc.hw.tablefile import TableHeader
 
 
 class LinkError(ConnectionError):
