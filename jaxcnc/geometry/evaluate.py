@@ -151,43 +151,48 @@ def _arc(a: dict, span, s, order: int, xp):
     return out
 
 
-def evaluate_path(
-    a: dict, span, s, order: int = 0, xp: ModuleType = np, poly_only: bool = False, polynomial: bool = False
-) -> tuple:
+def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, only: str | None = None) -> tuple:
     """Position and derivatives in ``s`` of span ``span[i]`` at ``s[i]`` mm from its start.
 
     Args:
         a: :func:`span_arrays` of the spans (the same ``xp``); span ``(m,)`` int; s ``(m,)`` mm (or any
             shapes that broadcast: span ``(m, 1)`` with s ``(m, k)`` reads each span's fields once).
         order: highest derivative (0..4).
-        poly_only: every queried span is a polynomial span (skips the other kinds' formulas);
-            ``polynomial``: and its weights are all 1 (blends: skips the quotient rule).
+        only: every queried span is of one family, and the other families' formulas are skipped:
+            ``"arc"`` (arcs and helices), ``"curve"`` (polynomial spans) or ``"blend"`` (polynomial
+            spans whose weights are all 1: no quotient rule).
     Returns:
         ``(q, q', ..., q^(order))``, each ``(m, 3)`` (the broadcast shape, then 3): mm, then per mm of
         path parameter.
     """
     if not 0 <= order <= 4:
         raise ValueError("order must be 0 to 4")
+    if only not in (None, "arc", "curve", "blend"):
+        raise ValueError(f"unknown span family {only!r}")
     kind = a["kind"][span]
     s = xp.clip(s, 0.0, a["length"][span])
     line = kind == SpanKind.LINE
     arc = kind == SpanKind.ARC
     poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
-    polys = _poly(a, span, s, order, xp, polynomial) if a["poly_timing"].shape[-1] else None
-    arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] and not poly_only else None
+    has_polys = a["poly_timing"].shape[-1] and only in (None, "curve", "blend")
+    polys = _poly(a, span, s, order, xp, only == "blend") if has_polys else None
+    arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] and only in (None, "arc") else None
     zero = xp.zeros_like(s)
     cols = [[] for _ in range(order + 1)]
     for i in range(3):
         o, t = a["origin"][i][span], a["tangent"][i][span]
-        lin = [o + xp.where(line, s, 0.0) * t, xp.where(line, t, 0.0)] + [zero] * (order - 1)
-        val = lin[: order + 1]
-        if poly_only:
+        if only == "arc":
+            val = arcs[i]
+        elif only is not None:
             val = [o + polys[i][0]] + polys[i][1:]
-        elif polys is not None:
-            pv = [o + polys[i][0]] + polys[i][1:]
-            val = [xp.where(poly, pv[r], val[r]) for r in range(order + 1)]
-        if arcs is not None:
-            val = [xp.where(arc, arcs[i][r], val[r]) for r in range(order + 1)]
+        else:
+            val = [o + xp.where(line, s, 0.0) * t, xp.where(line, t, 0.0)] + [zero] * (order - 1)
+            val = val[: order + 1]
+            if polys is not None:
+                pv = [o + polys[i][0]] + polys[i][1:]
+                val = [xp.where(poly, pv[r], val[r]) for r in range(order + 1)]
+            if arcs is not None:
+                val = [xp.where(arc, arcs[i][r], val[r]) for r in range(order + 1)]
         for r in range(order + 1):
             cols[r].append(val[r])
     return tuple(xp.stack(c, axis=-1) for c in cols)

@@ -135,7 +135,7 @@ def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray)
     """
     frac = jnp.linspace(0.0, 1.0, BOX_SAMPLES)
     where = s0[:, None] + delta[:, None] * frac[None, :]  # (m, BOX_SAMPLES); each span's fields read once
-    _, t, k, d3, d4 = evaluate_path(arrays, span[:, None], where, 4, jnp, poly_only=True, polynomial=True)
+    _, t, k, d3, d4 = evaluate_path(arrays, span[:, None], where, 4, jnp, only="blend")
     h2 = (BOX_SAFETY * (delta / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
     t_pad = jnp.max(jnp.abs(d3), axis=1) * h2
     k_pad = jnp.max(jnp.abs(d4), axis=1) * h2
