@@ -12,8 +12,9 @@ negative F or S, an N that is not a non-negative integer, a number that overflow
 through the line-by-line interpreter, which stays the reference implementation.
 
 :func:`plain_table` reads the whole program at once: comments and blanks removed with one regular
-expression pass each, the plain lines recognised by one more, every number converted in one NumPy call,
-each word put in a ``(blocks, 11)`` table of values and one of presence. :func:`interpret_run` then
+expression pass each, the plain lines recognised by one more, the digits of every number read as integers
+in one NumPy call and divided by an exact power of ten (bit for bit ``float()`` of the text), each word put
+in a ``(blocks, 11)`` table of values and one of presence. :func:`interpret_run` then
 executes a run of consecutive plain blocks from the modal state the interpreter has at its start: motion
 mode, feed and power forward-filled, positions forward-filled per axis (absolute) or summed in sequence
 (incremental), arc centres from I/J/K or R with LinuxCNC's radius tolerance and centre correction, full
@@ -35,6 +36,9 @@ from jaxcnc.program import Kind
 #: The letters a plain block may hold, in the column order of :attr:`PlainTable.values`.
 PLAIN_LETTERS = "GXYZIJKRFSN"
 _G, _X, _Y, _Z, _I, _J, _K, _R, _F, _S, _N = range(len(PLAIN_LETTERS))
+_MODAL = [_G, _F, _S]  # the modal words of a plain block
+_THREE = np.arange(3)
+_NAN3 = np.full(3, np.nan)
 #: Runs of fewer plain blocks than this are left to the line-by-line interpreter (the vectorised
 #: interpretation of a run has a fixed cost of some tens of microseconds).
 MIN_RUN = 4
@@ -52,6 +56,8 @@ _COLUMN = np.full(256, -1, dtype=np.int64)
 for _k, _c in enumerate(PLAIN_LETTERS):
     _COLUMN[ord(_c)] = _k
 _LETTERS_TO_SPACE = bytes(32 if (65 <= c <= 90 or c == 10) else c for c in range(256))
+#: 10**k as exact doubles (float() of the decimal text is exact for these).
+_POW10 = np.array([float(f"1e{k}") for k in range(16)])
 
 
 @dataclass(frozen=True)
@@ -63,12 +69,16 @@ class PlainTable:
         values: ``(n, 11)`` float64, each word's number (NaN where the block lacks the letter).
         present: ``(n, 11)`` bool, the block has the letter.
         complex_index: sorted indices of the blocks that are not plain, then ``n``.
+        axes, ijk, words: ``(n,)`` bool, the block has X/Y/Z, I/J/K, any word.
     """
 
     plain: np.ndarray
     values: np.ndarray
     present: np.ndarray
     complex_index: np.ndarray
+    axes: np.ndarray
+    ijk: np.ndarray
+    words: np.ndarray
 
     def run_end(self, i: int) -> int:
         """The first block at or after ``i`` that is not plain (``n`` when none is)."""
@@ -104,14 +114,8 @@ def plain_table(texts: list[str], paren_comments: bool = True, semicolon_comment
         np.add.at(edges, stop, -1)
         buf[np.cumsum(edges[:-1]) > 0] = 32
     letters = np.flatnonzero(buf >= 65)  # only word letters are >= 'A' in plain lines
-    numbers = (
-        np.fromstring(buf.tobytes().translate(_LETTERS_TO_SPACE), dtype=np.float64, sep=" ")
-        if letters.size
-        else np.zeros(0)  # (fromstring reads blanks alone as [-1.0])
-    )
-    if numbers.size != letters.size:  # pragma: no cover - the plain-line expression guarantees it
-        raise AssertionError("plain words and numbers do not pair up")
     line = np.searchsorted(breaks, letters)
+    numbers = _word_numbers(buf, letters, line, breaks)
     col = _COLUMN[buf[letters]]
     plain = np.ones(n, dtype=bool)
     plain[complex_lines] = False
@@ -131,7 +135,56 @@ def plain_table(texts: list[str], paren_comments: bool = True, semicolon_comment
     present[line, col] = True
     values[~plain] = np.nan
     present[~plain] = False
-    return PlainTable(plain, values, present, np.append(np.flatnonzero(~plain), n))
+    return PlainTable(
+        plain,
+        values,
+        present,
+        np.append(np.flatnonzero(~plain), n),
+        axes=present[:, _X : _Z + 1].any(axis=1),
+        ijk=present[:, _I : _K + 1].any(axis=1),
+        words=present.any(axis=1),
+    )
+
+
+def _word_numbers(buf: np.ndarray, letters: np.ndarray, line: np.ndarray, breaks: np.ndarray) -> np.ndarray:
+    """The number of each word (its letter at ``buf[letters[i]]``, on line ``line[i]``), bit for bit
+    what ``float()`` makes of its text, as the lexer converts it.
+
+    The digits are read as one integer per word (NumPy reads integers some ten times faster than
+    decimals) and divided by the power of ten of the digits after the point. With at most 15 digits
+    the integer and the power are exact doubles, so the one rounding of the division gives the
+    correctly rounded value of the decimal, which is what ``float()`` returns. Longer numbers go
+    through ``float()`` itself.
+    """
+    n = letters.size
+    if n == 0:
+        return np.zeros(0)
+    # A word runs from its letter to the next letter on its line, or to the line's end (plain lines
+    # hold no blanks any more).
+    same_line = np.append(line[1:] == line[:-1], False)
+    end = np.where(same_line, np.append(letters[1:], buf.size), np.append(breaks, buf.size)[line])
+    sign = buf[letters + 1]
+    negative = sign == 45  # '-'
+    signed = negative | (sign == 43)  # '+'
+    dots = np.flatnonzero(buf == 46)  # at most one per word, and only in plain words
+    dot_at = np.full(n, -1, dtype=np.int64)
+    dot_at[np.searchsorted(letters, dots, side="right") - 1] = dots
+    has_dot = dot_at >= 0
+    frac = np.where(has_dot, end - dot_at - 1, 0)
+    long = np.flatnonzero(end - letters - 1 - signed - has_dot > 15)
+    text = buf
+    if long.size:  # too many digits for the exact route: zeros here, float() below
+        text = buf.copy()
+        for i in long:
+            text[letters[i] + 1 : end[i]] = 48
+    digits = np.fromstring(text.tobytes().translate(_LETTERS_TO_SPACE, b"+-."), dtype=np.int64, sep=" ")
+    if digits.size != n:  # pragma: no cover - the plain-line expression guarantees it
+        raise AssertionError("plain words and numbers do not pair up")
+    values = digits / _POW10[np.minimum(frac, 15)]
+    values = np.where(negative, -values, values)  # -0 reads as -0.0, as float("-0") does
+    for i in long:
+        values[i] = float(buf[letters[i] + 1 : end[i]].tobytes().decode("ascii"))
+    return values
 
 
 @dataclass
@@ -169,12 +222,6 @@ class RunResult:
     any_words: bool = False
 
 
-def _fill(mask: np.ndarray, values: np.ndarray, initial: float) -> np.ndarray:
-    """``values`` where ``mask``, else the last such value before (``initial`` before the first)."""
-    idx = np.maximum.accumulate(np.where(mask, np.arange(mask.size), -1))
-    return np.where(idx >= 0, values[np.maximum(idx, 0)], initial)
-
-
 def interpret_run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> RunResult:
     """Execute the plain blocks ``a:b`` of ``table`` (source lines ``lines[a:b]``) from state ``st``.
 
@@ -196,75 +243,76 @@ def _run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> 
     V, P = table.values[a:b], table.present[a:b]
     n = b - a
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        g = P[:, _G]
-        motion = _fill(g, np.where(g, V[:, _G], 0.0) * 10, -1.0 if st.motion is None else st.motion).astype(np.int64)
-        feed_raw = _fill(P[:, _F], V[:, _F], np.nan if st.feed_raw is None else st.feed_raw)
-        power = _fill(P[:, _S], V[:, _S], st.power)
-        axes = P[:, _X] | P[:, _Y] | P[:, _Z]
-        rows = np.flatnonzero(axes)
+        # G (as tenths), F and S forward-filled from the state: column k of `modal`
+        have = P[:, _MODAL]
+        g0 = -1.0 if st.motion is None else st.motion / 10
+        initial = (g0, np.nan if st.feed_raw is None else st.feed_raw, st.power)
+        last = np.maximum.accumulate(np.where(have, np.arange(1, n + 1)[:, None], 0), axis=0)
+        modal = np.concatenate((np.array([initial]), V[:, _MODAL]))[last, _THREE]
+        motion = (modal[:, 0] * 10).astype(np.int64)  # negative: none; 0, 10, 20, 30
+        feed_raw = modal[:, 1]
+        axes, ijk = table.axes[a:b], table.ijk[a:b]
+        # rows: blocks with axis words, and arcs without them (full circles: "G2 I5", "I5 J0" in G2 mode)
+        arc_line = (motion >= 20) & (axes | have[:, 0] | ijk)
+        row_line = axes | arc_line
+        rows = np.flatnonzero(row_line)
         rm = motion[rows]
-        arc_row = rm >= 20
-        arc_line = np.zeros(n, dtype=bool)
-        arc_line[rows[arc_row]] = True
         # errors the interpreter raises for such blocks
-        bad = axes & (motion < 0)  # axis words with no motion mode
-        bad |= g & ~axes & (motion >= 20)  # an arc without end point words
-        bad |= (P[:, _I] | P[:, _J] | P[:, _K] | P[:, _R]) & ~arc_line  # I J K R with no meaning
-        bad |= axes & (motion >= 10) & (feed_raw == 0)  # feed rate zero
-        # end points: absolute values, or the increments summed in sequence from the start point
+        bad = (axes & (motion < 0)) | ((ijk | P[:, _R]) & ~arc_line) | (row_line & (motion >= 10) & (feed_raw == 0))
+        # end points: absolute values forward-filled, or the increments summed in sequence from the start
+        # point (an absent axis adds -0.0, which leaves every number as it is, -0.0 included)
         m = rows.size
-        end = np.empty((m, 3))
-        for k in range(3):
-            have = P[rows, _X + k]
-            v = V[rows, _X + k][have] * st.scale
-            if st.absolute:
-                v = v + st.offset[k]
-            seq = np.concatenate(([st.pos[k]], v))
-            if not st.absolute:
-                seq = np.cumsum(seq)  # sequential: ((p + d1) + d2) + ...
-            end[:, k] = seq[np.cumsum(have)]
-        start = np.concatenate((st.pos[None, :], end[:-1]))
-        center = np.full((m, 3), np.nan)
-        turn = np.zeros(m, dtype=np.int8)
-        arcs = np.flatnonzero(arc_row)
+        present = P[rows, 1:4]
+        if st.absolute:
+            given = np.concatenate((st.pos[None, :], V[rows, 1:4] * st.scale + st.offset))
+            pick = np.maximum.accumulate(np.where(present, np.arange(1, m + 1)[:, None], 0), axis=0)
+            end = given[pick, _THREE]
+        else:
+            steps = np.where(present, V[rows, 1:4] * st.scale, -0.0)
+            end = np.cumsum(np.concatenate((st.pos[None, :], steps)), axis=0)[1:]
+        start = np.concatenate((st.pos[None, :], end))[:-1]
+        odd = ~np.isfinite(end).all(axis=1)
+        arcs = np.flatnonzero(rm >= 20)
         if arcs.size:
-            arc_bad, centers = _arcs(V, P, rows[arcs], start[arcs], end[arcs], rm[arcs] == 20, st)
-            bad[rows[arcs][arc_bad]] = True
-            center[arcs] = centers
-            turn[arcs] = np.where(rm[arcs] == 20, -1, 1)
-        odd = np.zeros(n, dtype=bool)
-        odd[rows[~np.isfinite(end).all(axis=1)]] = True
-        odd[rows[arcs][~np.isfinite(center[arcs]).all(axis=1)]] = True
-        flagged = bad | odd
-        if flagged.any():
-            k = int(np.argmax(flagged))
-            return k, bool(odd[k]), RunResult(0)
+            center = np.full((m, 3), np.nan)
+            arc_bad, center[arcs] = _arcs(V, P, rows[arcs], start[arcs], end[arcs], rm[arcs] == 20, st)
+            bad[rows[arcs[arc_bad]]] = True
+            odd[arcs] |= ~np.isfinite(center[arcs]).all(axis=1)
+            turn = np.where(rm == 20, -1, np.where(rm == 30, 1, 0)).astype(np.int8)
+            kind = np.where(rm >= 20, int(Kind.ARC), int(Kind.LINE)).astype(np.int8)
+        else:
+            center = np.full((m, 3), np.nan)
+            turn = np.full(m, np.int8(0))
+            kind = np.full(m, np.int8(Kind.LINE))
+        if odd.any():
+            bad[rows[odd]] = True
+        if bad.any():
+            k = int(np.argmax(bad))
+            return k, bool(np.isin(k, rows[odd])), RunResult(0)
         fr = feed_raw[rows]
         feed = np.where((rm == 0) | np.isnan(fr), np.nan, fr * st.scale / 60.0)
     stop = np.full(m, st.exact_stop)
     if m:
         stop[0] = st.pending_stop or st.exact_stop
     columns = {
-        "kind": np.where(arc_row, int(Kind.ARC), int(Kind.LINE)).astype(np.int8),
+        "kind": kind,
         "start": start,
         "end": end,
         "center": center,
         "turn": turn,
         "feed": feed,
         "rapid": rm == 0,
-        "laser": np.full(m, st.laser, dtype=np.int8),
-        "power": power[rows],
+        "laser": np.full(m, np.int8(st.laser)),
+        "power": modal[rows, 2],
         "dwell_s": np.zeros(m),
         "stop_before": stop,
         "blend_tol": np.full(m, 0.0 if st.exact_stop else st.blend_tol),
-        "event": np.zeros(m, dtype=np.int8),
-        "event_value": np.zeros(m, dtype=np.int32),
-        "line": np.asarray(lines[a:b], dtype=np.int64)[rows],
-        "curve": np.full(m, -1, dtype=np.int32),
-        "plane": np.full(m, st.plane, dtype=np.int8),
+        "event": np.full(m, np.int8(0)),
+        "event_value": np.full(m, np.int32(0)),
+        "line": lines[a:b][rows],
+        "curve": np.full(m, np.int32(-1)),
+        "plane": np.full(m, np.int8(st.plane)),
     }
-    last_motion = int(motion[-1]) if n else (-1 if st.motion is None else st.motion)
-    last_feed = float(feed_raw[-1]) if n else np.nan
     return (
         -1,
         False,
@@ -272,10 +320,10 @@ def _run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> 
             blocks=n,
             columns=columns,
             pos=end[-1].copy() if m else st.pos.copy(),
-            motion=None if last_motion < 0 else last_motion,
-            feed_raw=None if np.isnan(last_feed) else last_feed,
-            power=float(power[-1]) if n else st.power,
-            any_words=bool(P.any()),
+            motion=None if motion[-1] < 0 else int(motion[-1]),
+            feed_raw=None if np.isnan(feed_raw[-1]) else float(feed_raw[-1]),
+            power=float(modal[-1, 2]),
+            any_words=bool(table.words[a:b].any()),
         ),
     )
 

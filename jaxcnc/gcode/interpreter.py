@@ -7,10 +7,14 @@ turns every supported word into its proper meaning and refuses everything else w
 silently ignored.
 
 Supported here: G0 G1 G2 G3 (arcs in the G17/G18/G19 planes in IJK or R form, full circles,
-helices), G4, G5 G5.1 G5.2/G5.3 G6.2 splines, G17 G18 G19, G20 G21, G28, G40, G43 H0 / G49,
-G53, G54–G59.3, G61 G61.1 G64 (P, Q), G90 G91, G90.1 G91.1, G92 G92.1 G92.2 G92.3, G94, F, S, T,
-M0 M1 M2 M30, M3 M4 M5, M6, M7 M8 M9, N, block delete, comments, ``%`` delimiters, and through the
-preprocessor parameters, expressions and O-word control flow.
+helices, P turns), G4, G5 G5.1 G5.2/G5.3 G6.2 splines, G8, G10 L2 (zero values), G17 G18 G19,
+G20 G21, G28, G40, G43 H0 / G49, G53, G54–G59.3, G61 G61.1 G64 (P, Q), G80, G90 G91, G90.1 G91.1,
+G92 G92.1 G92.2 G92.3, G94, G97, G98 G99, F, S, T, M0 M1 M2 M30, M3 M4 M5, M6, M7 M8 M9, N, block
+delete, comments, ``%`` delimiters, and through the preprocessor parameters, expressions and O-word
+control flow. Codes that name something jaxcnc cannot honour (canned cycles, spindle-synchronized
+motion, probing, tool tables, rotary axes, ...) are refused with the reason.
+
+Runs of plain motion blocks go through :mod:`jaxcnc.gcode.fastpath` in bulk, to the same result.
 """
 
 from __future__ import annotations
@@ -93,17 +97,97 @@ _G_GROUP = {
     591: 12,
     592: 12,
     593: 12,
+    # words of CAM post headers
+    80: 15,  # G8 lathe radius mode (the default)
+    100: 0,  # G10 L2 (zero values only)
+    800: 100,  # G80: its own group (on ISO controls G80 is in the canned-cycle group, apart from G0-G3)
+    970: 14,  # G97 spindle speed in RPM (the default)
+    980: 10,  # G98 / G99 canned-cycle return level
+    990: 10,
 }
 _M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8}
-_NOT_YET = {
-    410: "cutter compensation G41",
-    420: "cutter compensation G42",
+_CYCLE = "canned cycles are not supported: have the post write the cycle out as G0/G1 moves"
+_LATHE_CYCLE = "lathe cycles are not supported"
+_SPINDLE = "needs a spindle encoder, which a laser machine lacks"
+_PROBE = "probing needs a probe input, which jaxcnc does not have"
+_FANUC = "is not a LinuxCNC code and is not supported"
+#: Why known G codes (tenths) are refused.
+_REFUSED_G = {
+    70: "G7 lathe diameter mode is not supported (G8, radius mode, is the only mode)",
+    171: "G17.1 selects a plane of the U V W axes; jaxcnc plans X, Y and Z only",
+    181: "G18.1 selects a plane of the U V W axes; jaxcnc plans X, Y and Z only",
+    191: "G19.1 selects a plane of the U V W axes; jaxcnc plans X, Y and Z only",
+    281: "G28.1 stores the home position; jaxcnc takes it from the caller (home=)",
+    300: "G30 goes to the second home position, which is not configured (G28 goes home)",
+    301: "G30.1 stores the second home position, which is not configured",
+    330: f"G33 spindle-synchronized motion {_SPINDLE}",
+    331: f"G33.1 rigid tapping {_SPINDLE}",
+    382: f"G38.2 {_PROBE}",
+    383: f"G38.3 {_PROBE}",
+    384: f"G38.4 {_PROBE}",
+    385: f"G38.5 {_PROBE}",
+    410: "cutter compensation G41 is not supported yet",
+    411: "cutter compensation G41.1 is not supported yet",
+    420: "cutter compensation G42 is not supported yet",
+    421: "cutter compensation G42.1 is not supported yet",
+    431: "G43.1 dynamic tool length offset: no tool table is configured (only G43 H0 and G49)",
+    432: "G43.2 tool length offset: no tool table is configured (only G43 H0 and G49)",
+    500: f"G50 (scaling off on Fanuc mills, a spindle limit on lathes) {_FANUC}",
+    510: f"G51 (scaling on Fanuc mills) {_FANUC}",
+    520: "G52 local coordinate offsets are not supported (G92 is)",
+    680: f"G68 (coordinate rotation on Fanuc) {_FANUC}",
+    690: f"G69 (coordinate rotation off on Fanuc) {_FANUC}",
+    700: f"G70 finishing cycle: {_LATHE_CYCLE}",
+    710: f"G71 roughing cycle: {_LATHE_CYCLE}",
+    711: f"G71.1 roughing cycle: {_LATHE_CYCLE}",
+    720: f"G72 facing cycle: {_LATHE_CYCLE}",
+    721: f"G72.1 facing cycle: {_LATHE_CYCLE}",
+    730: f"G73 is a drilling cycle: {_CYCLE}",
+    740: f"G74 is a tapping cycle: {_CYCLE}",
+    760: f"G76 threading cycle {_SPINDLE}",
+    **{c: f"G{c // 10} is a drilling or boring cycle: {_CYCLE}" for c in range(810, 900, 10)},
+    930: "G93 inverse-time feed is not supported (G94, units per minute, is)",
+    950: "G95 feed per revolution needs a spindle; use G94 (units per minute)",
+    960: "G96 constant surface speed is a lathe spindle mode; here S is the laser power (G97)",
+}
+#: Why known M codes are refused.
+_REFUSED_M = {
+    19: "M19 spindle orientation needs a spindle; a laser machine has none",
+    **{c: f"M{c} override control is not supported (a plan runs at 100 %)" for c in (48, 49, 50, 51, 52, 53)},
+    60: "M60 pallet change is not supported",
+    61: "M61 (set the tool number without a change) is not supported; use T and M6",
+    **{c: f"M{c} digital output is not supported: switch the laser with M3/M4/M5" for c in (62, 63, 64, 65)},
+    66: "M66 waiting on an input is not supported",
+    **{c: f"M{c} analog output is not supported: set the laser power with S" for c in (67, 68)},
+    **{c: f"M{c} saving or restoring the modal state is not supported" for c in (70, 71, 72, 73)},
+}
+#: Why letters outside the supported words are refused.
+_LETTER_REASONS = {
+    **{a: "jaxcnc plans the X, Y and Z axes only" for a in "ABCUVW"},
+    "D": "cutter compensation (G41/G42 with D) is not supported",
+    "E": "E is not an RS274NGC word (3D printer extrusion?)",
 }
 _AXES = ("X", "Y", "Z")
 _ALLOWED = set("GMFSTNPQXYZIJKRLH")
 _SPLINE_CODES = (50, 51, 52, 62, 10010)
 _SPLINE_NAMES = {50: "G5", 51: "G5.1", 52: "G5.2", 62: "G6.2", 10010: "BSPLINE"}
-_NEEDS_PREPROCESSOR = re.compile(r"[#\[\]]|^\s*/?\s*[oO]", re.MULTILINE)
+# A line that starts (after blanks and a block delete '/') with an O-word. This is what the expression
+# ^\s*/?\s*[oO] finds in MULTILINE mode, written with a leading newline so that the search skips
+# from line break to line break instead of trying every character.
+_O_WORD_LEAD = r"[^\S\n]*/?[^\S\n]*[oO]"
+_O_WORD_FIRST = re.compile(_O_WORD_LEAD)
+_O_WORD_LINE = re.compile(r"\n" + _O_WORD_LEAD)
+
+
+def _needs_preprocessor(text: str) -> bool:
+    """The program has parameters, expressions or O-words (for :mod:`jaxcnc.gcode.preprocess`)."""
+    return (
+        "#" in text
+        or "[" in text
+        or "]" in text
+        or _O_WORD_FIRST.match(text) is not None
+        or _O_WORD_LINE.search(text) is not None
+    )
 
 
 @dataclass
@@ -115,7 +199,8 @@ class _State:
     feed_raw: float | None = None  # F as written, program units per minute
     power: float = 0.0
     laser: int = LaserMode.OFF
-    tool: int = 0
+    tool: int = 0  # selected (T)
+    loaded_tool: int = 0  # in the spindle (M6)
     exact_stop: bool = False  # G61.1
     blend_tol: float = math.inf  # G64 without P (LinuxCNC's start-up mode)
     pending_stop: bool = True
@@ -124,6 +209,7 @@ class _State:
     g92: np.ndarray = field(default_factory=lambda: np.zeros(3))  # G92 offset (mm)
     g92_saved: np.ndarray = field(default_factory=lambda: np.zeros(3))
     g5_last_pq: np.ndarray | None = None  # P, Q of the previous G5 (for tangent continuation)
+    g80_line: int | None = None  # the G80 that left no motion mode (for error messages)
     nurbs: NurbsBlock | None = None  # a G5.2 / G6.2 curve being read
     curves: list = field(default_factory=list)
     rows: dict[str, list] = field(default_factory=lambda: {k: [] for k in PROGRAM_COLUMNS})
@@ -142,16 +228,19 @@ class _Block:
         m_groups: dict[int, Word] = {}
         for w in words:
             if w.letter not in _ALLOWED and w.letter not in dialect.addresses:
-                raise self.error(w, f"unsupported word {w.letter}{w.text}")
+                why = _LETTER_REASONS.get(w.letter)
+                raise self.error(w, f"unsupported word {w.letter}{w.text}" + (f": {why}" if why else ""))
             if w.letter in "GM":
                 code = round(w.value * 10) if w.letter == "G" else round(w.value)
                 exact = w.value * 10 if w.letter == "G" else w.value
                 table, groups = (_G_GROUP, g_groups) if w.letter == "G" else (_M_GROUP, m_groups)
                 if abs(exact - code) > 1e-9 or code not in table:
-                    what = _NOT_YET.get(code) if w.letter == "G" and abs(exact - code) < 1e-9 else None
-                    raise self.error(
-                        w, f"{what} is not supported yet" if what else f"unknown or unsupported word {w.letter}{w.text}"
-                    )
+                    why = None
+                    if abs(exact - code) <= 1e-9:
+                        why = (_REFUSED_G if w.letter == "G" else _REFUSED_M).get(code)
+                        if w.letter == "M" and 100 <= code <= 199:
+                            why = f"M{code} runs a user-defined program, which jaxcnc cannot follow"
+                    raise self.error(w, why or f"unknown or unsupported word {w.letter}{w.text}")
                 if w.letter == "G" and code in _SPLINE_NAMES and _SPLINE_NAMES[code] not in dialect.splines:
                     raise self.error(w, f"{_SPLINE_NAMES[code]} is not part of the {dialect.name} dialect")
                 group = table[code]
@@ -253,7 +342,7 @@ class _Interpreter:
             if not continues or b.has_g(10010) is not None:
                 self.finish_nurbs(b)
                 if b.has_g(10010) is None and s.motion == 10010:
-                    s.motion = None
+                    s.motion, s.g80_line = None, None
         # F, S, T
         if (w := b.take("F")) is not None:
             if w.value < 0:
@@ -270,6 +359,7 @@ class _Interpreter:
         # M6 tool change: the motion stops, the tool is changed, the program goes on.
         if b.has_m(6) is not None:
             self.emit(Kind.EVENT, b.line, event=Event.TOOL_CHANGE, event_value=s.tool)
+            s.loaded_tool = s.tool
         # M3/M4/M5: the laser is switched at rest (like a spindle, motion waits for it).
         for code, mode in ((3, LaserMode.CONSTANT), (4, LaserMode.DYNAMIC), (5, LaserMode.OFF)):
             if b.has_m(code) is not None and s.laser != mode:
@@ -308,10 +398,18 @@ class _Interpreter:
                     raise b.error(w, f"negative tolerance {w.letter}{w.text}")
             s.blend_tol = p.value * s.scale if p is not None else math.inf
         # tool length offset: there is no tool table, so only "no offset" has a meaning
-        if b.has_g(430) is not None:
+        if (g43 := b.has_g(430)) is not None:
             h = b.take("H")
             if h is not None and h.value != 0:
-                raise b.error(h, f"tool length offset H{h.text}: no tool table is configured (only H0)")
+                raise b.error(
+                    h, f"tool length offset H{h.text}: no tool table is configured (only H0, or G49: no offset)"
+                )
+            if h is None and s.loaded_tool != 0:
+                raise b.error(
+                    g43,
+                    f"G43 without H takes the offset of the loaded tool T{s.loaded_tool}: no tool table is "
+                    "configured (only H0, or G49: no offset)",
+                )
         # arc centre mode
         if b.has_g(901) is not None:
             s.arc_absolute = True
@@ -322,12 +420,15 @@ class _Interpreter:
             s.absolute = True
         if b.has_g(910) is not None:
             s.absolute = False
-        # motion mode
-        # work coordinate systems G54-G59.3: no offsets are set (G10 is not supported), so each is
-        # the machine system; selecting one is accepted and changes nothing
+        # G8 (lathe radius mode), G97 (spindle RPM mode) and G98/G99 (canned-cycle return level) name
+        # the only modes there are: accepted, they change nothing. So does G40 (no compensation is
+        # ever active) and selecting a work coordinate system G54-G59.3: no offsets can be set
+        # (G10 L2 only to zero), so each is the machine system.
+        # motion mode; G80 (cancel canned cycle: none ever runs) also cancels the motion mode, as in
+        # LinuxCNC, unless the block names one (the "G0 G17 G40 G49 G80 G90" of ISO post headers).
         motion_word = None
-        for code in (0, 10, 20, 30, *_SPLINE_CODES):
-            if (w := b.has_g(code)) is not None:
+        for code in (0, 10, 20, 30, *_SPLINE_CODES, 800):
+            if (w := b.has_g(code)) is not None and (code != 800 or motion_word is None):
                 if s.nurbs is not None and s.nurbs.kind == "G5.2" and code != 52:
                     raise b.error(w, f"G5.2 NURBS opened at line {s.nurbs.line} is not closed with G5.3")
                 if s.nurbs is not None and s.nurbs.kind == "G6.2" and not s.nurbs.complete and code != 62:
@@ -337,19 +438,42 @@ class _Interpreter:
                         f"G6.2 NURBS opened at line {nb.line} is incomplete: {len(nb.knots)} knots, "
                         f"{len(nb.points) + nb.order} needed",
                     )
-                s.motion, motion_word = code, w
+                if code == 800:
+                    s.motion, s.g80_line = None, b.line
+                else:
+                    s.motion, motion_word = code, w
         axes = b.axis_words()
         for letter in _AXES:
             b.take(letter)
-        if (g92 := b.has_g(920)) is not None:
+        # G10 and G92 take the block's axis words for themselves (neither moves); then the M words
+        # below still act ("G92 X0 M2")
+        if (g10 := b.has_g(100)) is not None:
+            self.g10(b, g10, axes, motion_word)
+        elif (g92 := b.has_g(920)) is not None:
             if not axes:
                 raise b.error(g92, "G92 needs axis words")
             if motion_word is not None:
                 raise b.error(g92, "G92 and a motion G code in one block both claim the axis words")
             for k, w in axes.items():  # the current position now reads as the given value
                 s.g92[k] = s.pos[k] - w.value * s.scale
-            b.check_all_used()
-            return
+        else:
+            self.move(b, axes, motion_word)
+        # stops and end
+        for code, ev in (
+            (0, Event.PROGRAM_STOP),
+            (1, Event.OPTIONAL_STOP),
+            (2, Event.PROGRAM_END),
+            (30, Event.PROGRAM_END),
+        ):
+            if b.has_m(code) is not None:
+                self.emit(Kind.EVENT, b.line, event=ev)
+                if ev == Event.PROGRAM_END:
+                    self.ended = True
+        b.check_all_used()
+
+    def move(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
+        """The block's G92.1-G92.3, then what moves: G53, G5.3, a spline point, G28, a line or an arc."""
+        s = self.s
         for code in (921, 922):
             if b.has_g(code) is not None:
                 if code == 922:
@@ -366,7 +490,7 @@ class _Interpreter:
             if axes:
                 raise b.error(next(iter(axes.values())), "G5.3 takes no axis words")
             self.finish_nurbs(b)
-            s.motion = None
+            s.motion, s.g80_line = None, None
         elif s.motion in _SPLINE_CODES and (
             axes or motion_word is not None or (s.motion == 62 and s.nurbs is not None and "K" in b.vals)
         ):
@@ -378,27 +502,51 @@ class _Interpreter:
         elif axes:
             if s.motion is None:
                 w = next(iter(axes.values()))
-                raise b.error(w, "axis words with no motion mode (G0/G1/G2/G3) in effect")
+                if b.has_g(800) is not None:
+                    raise b.error(w, "G80 cancels the motion mode: axis words need G0/G1/G2/G3 in the block")
+                after = f" (G80 at line {s.g80_line} cancelled it)" if s.g80_line is not None else ""
+                raise b.error(w, f"axis words with no motion mode (G0/G1/G2/G3) in effect{after}")
             self.motion(b, axes, motion_word)
-        elif motion_word is not None and s.motion in (20, 30):
-            raise b.error(motion_word, "arc needs end point words (X/Y equal to the start for a full circle)")
-        # stops and end
-        for code, ev in (
-            (0, Event.PROGRAM_STOP),
-            (1, Event.OPTIONAL_STOP),
-            (2, Event.PROGRAM_END),
-            (30, Event.PROGRAM_END),
-        ):
-            if b.has_m(code) is not None:
-                self.emit(Kind.EVENT, b.line, event=ev)
-                if ev == Event.PROGRAM_END:
-                    self.ended = True
-        b.check_all_used()
+        elif s.motion in (20, 30) and (motion_word is not None or any(c in b.vals for c in "IJK")):
+            # an arc without end point words ends where it starts: a full circle ("G2 I5", as LinuxCNC)
+            self.motion(b, axes, motion_word)
 
     @property
     def offset(self) -> np.ndarray:
         """Program → machine coordinates: the G92 offset (work offsets G54–G59.3 are zero)."""
         return self.s.g92
+
+    def g10(self, b: _Block, g10: Word, axes: dict[int, Word], motion_word: Word | None) -> None:
+        """G10 L2: set a coordinate system's offsets and rotation — only to the zero they have.
+
+        Work offsets are not kept (G54-G59.3 all equal the machine system), so a G10 L2 that sets
+        zeros, as post headers and LinuxCNC's tests write it ("G10 L2 P0 R0"), changes nothing and
+        is accepted; any other value, L20 (offsets from the current point) and the tool-table forms
+        L1/L10/L11 are refused.
+        """
+        if motion_word is not None and axes:
+            raise b.error(g10, "G10 and a motion G code in one block both claim the axis words")
+        l_word, p, r = b.take("L"), b.take("P"), b.take("R")
+        if l_word is None:
+            raise b.error(g10, "G10 needs L (L2: coordinate system offsets)")
+        if l_word.value in (1, 10, 11):
+            raise b.error(l_word, f"G10 L{l_word.text} writes the tool table; jaxcnc has none")
+        if l_word.value == 20:
+            raise b.error(l_word, "G10 L20 sets a work offset from the current point; work offsets are not supported")
+        if l_word.value != 2:
+            raise b.error(l_word, f"G10 L{l_word.text} is not a G10 form (L2 sets coordinate system offsets)")
+        if p is None:
+            raise b.error(g10, "G10 L2 needs P (0: the active system, 1-9: G54-G59.3)")
+        if p.value != int(p.value) or not 0 <= p.value <= 9:
+            raise b.error(p, f"G10 L2 P{p.text}: P is 0 (the active system) or 1-9 (G54-G59.3)")
+        for w in (*axes.values(), r):
+            if w is not None and w.value != 0:
+                what = "rotation" if w.letter == "R" else "offset"
+                raise b.error(
+                    w,
+                    f"G10 L2 {w.letter}{w.text}: a coordinate system {what} other than zero is not supported "
+                    "(G54-G59.3 all equal the machine system)",
+                )
 
     def target(self, axes: dict[int, Word]) -> np.ndarray:
         s = self.s
@@ -434,7 +582,7 @@ class _Interpreter:
     def motion(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
         s = self.s
         end = self.target(axes)
-        first = motion_word or next(iter(axes.values()))
+        first = motion_word or next(iter(axes.values()), None) or next(b.vals[c] for c in "IJK" if c in b.vals)
         if s.motion == 0:
             self.emit(Kind.LINE, b.line, end, rapid=True)
         elif s.motion == 10:
@@ -452,6 +600,11 @@ class _Interpreter:
         end = end_prog[list(perm)]
         words = {letter: b.take(letter) for letter in "IJK"}
         r = b.take("R")
+        # P: the number of turns (a P of G4 or G64 in the same block is theirs)
+        p = b.take("P") if b.has_g(40) is None and b.has_g(640) is None else None
+        if p is not None and (p.value != int(p.value) or p.value < 1):
+            raise b.error(p, f"arc turns P{p.text} must be a positive integer")
+        turns = 1 if p is None else int(p.value)
         normal_offset = words["IJK"[perm[2]]]
         if normal_offset is not None:
             raise b.error(
@@ -508,9 +661,24 @@ class _Interpreter:
                 n = np.array([-chord[1], chord[0]]) / d
                 off = c2 - mid
                 c2 = mid + float(off[0] * n[0] + off[1] * n[1]) * n
+        feed, turn = self.feed_mm_s(b, first), -1 if cw else 1
+        if turns > 1:
+            # P turns: P - 1 full circles, then the arc, the motion along the normal shared out in
+            # proportion to the angle turned (LinuxCNC's helix of P turns)
+            a_s = math.atan2(start[1] - c2[1], start[0] - c2[0])
+            a_e = math.atan2(end[1] - c2[1], end[0] - c2[0])
+            sweep = 2 * math.pi if d < 1e-9 else ((a_s - a_e) if cw else (a_e - a_s)) % (2 * math.pi)
+            total = sweep + 2 * math.pi * (turns - 1)
+            z0, rise = start[2], end[2] - start[2]
+            for k in range(1, turns):
+                circle_end = s.pos.copy()
+                circle_end[perm[2]] = z0 + rise * (2 * math.pi * k / total)
+                center = np.empty(3)
+                center[list(perm)] = [c2[0], c2[1], s.pos[perm[2]]]
+                self.emit(Kind.ARC, b.line, circle_end, center=center, turn=turn, feed=feed)
         center = np.empty(3)
-        center[list(perm)] = [c2[0], c2[1], start[2]]
-        self.emit(Kind.ARC, b.line, end_prog, center=center, turn=-1 if cw else 1, feed=self.feed_mm_s(b, first))
+        center[list(perm)] = [c2[0], c2[1], s.pos[perm[2]]]
+        self.emit(Kind.ARC, b.line, end_prog, center=center, turn=turn, feed=feed)
 
     # -- splines -------------------------------------------------------------------------------
     def spline(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
@@ -802,7 +970,7 @@ def parse_gcode(
     dia = load_dialect(dialect)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
     it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia)
-    if _NEEDS_PREPROCESSOR.search(text):
+    if _needs_preprocessor(text):
         expanded = expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia)
         texts = [e.text for e in expanded]
         lines = np.fromiter((e.line for e in expanded), dtype=np.int64, count=len(expanded))

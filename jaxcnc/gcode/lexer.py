@@ -109,6 +109,10 @@ def tokenize(raw: str, file: str, line_no: int, dialect=None) -> tuple[list[Word
                 )
             if c == "/":
                 raise SourceError(file, line_no, col, "block delete '/' must start the block")
+            if c in "@^":
+                raise SourceError(
+                    file, line_no, col, f"polar coordinates ('@' distance, '^' angle) are not supported: {c!r}"
+                )
             shown = c if c.isprintable() else repr(c)
             raise SourceError(file, line_no, col, f"unexpected character {shown!r}: expected a word such as G1 or X10")
         letter = c.upper()
