@@ -9,14 +9,16 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.bench.plan import _best, tick_rate
+from jaxcnc.bench.common import REPEATS, BenchInputMissing, measure, run_header
+from jaxcnc.bench.plan import tick_rate
 from jaxcnc.bench.programs import BENCH_MACHINE, find_butterfly, random_cubic_nurbs
 from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job
 
 
-def bench_curve(name: str, curve: tuple, n_eval: int = 1_000_000, repeats: int = 3, feed: float = 10.0) -> dict:
-    """Evaluation points/s (jaxcnc vs scipy vs geomdl) and tick generation ticks/s on one curve."""
+def bench_curve(name: str, curve: tuple, n_eval: int = 1_000_000, repeats: int = REPEATS, feed: float = 10.0) -> dict:
+    """Evaluation points/s (jaxcnc vs scipy vs geomdl; random and sorted parameters) and tick generation
+    ticks/s on one curve, min/median of ``repeats`` with CPU time beside wall time."""
     from scipy.interpolate import BSpline
 
     from jaxcnc.geometry.bezier import homogeneous_power, nurbs_to_bezier
@@ -37,26 +39,34 @@ def bench_curve(name: str, curve: tuple, n_eval: int = 1_000_000, repeats: int =
         (pos,) = evaluate_bezier(coeffs_t, origin_t, k, (t - breaks[k]) / width[k], xp=jnp)
         return pos
 
-    t = jnp.asarray(np.random.default_rng(2).uniform(knots[0], knots[-1], n_eval))
-    t0 = time.perf_counter()
-    ref = np.asarray(eval_params(t))
-    compile_s = time.perf_counter() - t0
-    t_jax = _best(lambda: eval_params(t).block_until_ready(), repeats)
     spl = BSpline(knots, np.c_[pts * w[:, None], w], p)
-    t_np = np.asarray(t)
-
-    def scipy_eval():
-        h = spl(t_np)
-        return h[:, :3] / h[:, 3:]
-
-    t_scipy = _best(scipy_eval, repeats)
-    err = float(np.max(np.abs(scipy_eval() - ref)))
     print(f"  {name}: {len(pts)} control points, degree {p}, {len(iv)} Bezier spans")
-    print(
-        f"    evaluation of {n_eval:,} points (compile {compile_s:.2f} s apart): jaxcnc {n_eval / t_jax:,.0f} pts/s; "
-        f"scipy BSpline {n_eval / t_scipy:,.0f} pts/s (jaxcnc {t_scipy / t_jax:.2f}x); max |diff| {err:.1e} mm"
-    )
-    out = {"eval_jax_pts_s": n_eval / t_jax, "eval_scipy_pts_s": n_eval / t_scipy, "eval_compile_s": compile_s}
+    out = {}
+    draws = np.random.default_rng(2).uniform(knots[0], knots[-1], n_eval)
+    # random parameters, and sorted ones (a tick stream reads its curve in order: scipy's knot search caches)
+    for order, values in (("random", draws), ("sorted", np.sort(draws))):
+        t = jax.device_put(values)
+        t0 = time.perf_counter()
+        ref = np.asarray(eval_params(t))
+        compile_s = time.perf_counter() - t0
+
+        def scipy_eval(values=values):
+            h = spl(values)
+            return h[:, :3] / h[:, 3:]
+
+        s_jax = measure(lambda t=t: eval_params(t).block_until_ready(), repeats)
+        s_scipy = measure(scipy_eval, repeats)
+        err = float(np.max(np.abs(scipy_eval() - ref)))
+        print(
+            f"    evaluation of {n_eval:,} {order} parameters (compile {compile_s:.2f} s apart): jaxcnc "
+            f"{n_eval / s_jax.wall_min:,.0f} pts/s, scipy BSpline {n_eval / s_scipy.wall_min:,.0f} pts/s "
+            f"(jaxcnc {s_scipy.wall_min / s_jax.wall_min:.2f}x; min of {repeats}, CPU-time ratio "
+            f"{s_scipy.cpu_min / s_jax.cpu_min:.2f}x); max |diff| {err:.1e} mm"
+        )
+        print(f"      jaxcnc {s_jax}; scipy {s_scipy}")
+        out[order] = {"jax": s_jax.as_dict(), "scipy": s_scipy.as_dict(), "compile_s": compile_s, "max_diff_mm": err}
+    t = jax.device_put(draws)
+    t_jax = out["random"]["jax"]["wall_min_s"]
     try:
         from geomdl import NURBS
 
@@ -66,7 +76,7 @@ def bench_curve(name: str, curve: tuple, n_eval: int = 1_000_000, repeats: int =
         crv.knotvector = knots.tolist()
         n_g = 20_000
         tg = ((np.asarray(t[:n_g]) - knots[0]) / (knots[-1] - knots[0])).tolist()
-        t_geomdl = _best(lambda: crv.evaluate_list(tg), 1)
+        t_geomdl = measure(lambda: crv.evaluate_list(tg), 1).wall_min
         print(
             f"    geomdl (pure Python) {n_g / t_geomdl:,.0f} pts/s on {n_g:,} points (jaxcnc "
             f"{(n_g / t_geomdl) and (n_eval / t_jax) / (n_g / t_geomdl):.0f}x)"
@@ -80,23 +90,27 @@ def bench_curve(name: str, curve: tuple, n_eval: int = 1_000_000, repeats: int =
     t0 = time.perf_counter()
     job = plan_job(prog, m)
     plan_first = time.perf_counter() - t0
-    rate, tick_compile = tick_rate(job, 30, repeats)
+    n_ticks, stat, tick_compile = tick_rate(job, 30, repeats)
+    rate = n_ticks / stat.wall_min
     print(
-        f"    plan (incl. span certification and compile) {plan_first:.2f} s; tick generation t -> s -> u(s) -> "
-        f"position -> integers: {rate:,.0f} ticks/s = {rate / 1e4:,.0f}x the documents' 10 kHz "
-        f"(compile {tick_compile:.2f} s apart)"
+        f"    plan (incl. span certification and compile) {plan_first:.2f} s; tick generation t -> s -> "
+        f"position -> integers: {rate:,.0f} ticks/s (min; median {n_ticks / stat.wall_median:,.0f}) = "
+        f"{rate / 1e4:,.0f}x the documents' 10 kHz (compile {tick_compile:.2f} s apart; {stat})"
     )
-    out.update({"ticks_per_s": rate, "tick_compile_s": tick_compile, "plan_first_s": plan_first})
+    out.update(
+        {"ticks_per_s": rate, "ticks": stat.as_dict(), "tick_compile_s": tick_compile, "plan_first_s": plan_first}
+    )
     return out
 
 
-def run_geometry_benchmarks(n_eval: int = 1_000_000, repeats: int = 3) -> dict:
-    print(f"jaxcnc bench (geometry): NURBS evaluation and tick generation, JAX on {jax.devices()[0]}")
-    out = {}
+def run_geometry_benchmarks(n_eval: int = 1_000_000, repeats: int = REPEATS) -> dict:
+    """Run the suite on the corpus butterfly and a random 1000-point NURBS; print and return the figures."""
     bfly = find_butterfly()
-    if bfly is not None:
-        out["butterfly"] = bench_curve("butterfly (corpus)", bfly, n_eval, repeats, feed=2.0)
-    else:
-        print("  butterfly: shared/corpus not found, skipped")
+    if bfly is None:  # before anything is printed: a missing input is an error, not a smaller run
+        raise BenchInputMissing(
+            "shared/corpus/nurbs/butterfly_deg3_iges.json not found (the geometry benchmark's input)"
+        )
+    out = {"info": run_header("geometry")}
+    out["butterfly"] = bench_curve("butterfly (corpus)", bfly, n_eval, repeats, feed=2.0)
     out["nurbs1000"] = bench_curve("random cubic NURBS", random_cubic_nurbs(1000), n_eval, repeats)
     return out

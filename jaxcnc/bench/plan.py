@@ -20,14 +20,13 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import jax
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.bench.common import REPEATS, measure, run_header
+from jaxcnc.bench.common import REPEATS, Stat, measure, run_header
 from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline, random_cubic_nurbs, synthetic_program
 from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job
@@ -85,17 +84,8 @@ def numpy_lookahead(cap: np.ndarray, delta: np.ndarray) -> np.ndarray:
     return forward(back, delta)
 
 
-def _best(fn: Callable[[], object], repeats: int) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
-def tick_rate(job, n_chunks: int, repeats: int) -> tuple[float, float]:
-    """Steady ticks/s of sampling and quantising up to ``n_chunks`` chunks of ``job``, and the compile time."""
+def tick_rate(job, n_chunks: int, repeats: int) -> tuple[int, Stat, float]:
+    """Sampling and quantising up to ``n_chunks`` chunks of ``job``: ``(ticks, timing, compile seconds)``."""
     sampler = TickSampler(job)
     n_ticks = min(sampler.n_rows, n_chunks * sampler.chunk)
 
@@ -107,7 +97,7 @@ def tick_rate(job, n_chunks: int, repeats: int) -> tuple[float, float]:
     t0 = time.perf_counter()
     sampler.program_positions(0, sampler.chunk)
     compile_s = time.perf_counter() - t0
-    return n_ticks / _best(sample_all, repeats), compile_s
+    return n_ticks, measure(sample_all, repeats), compile_s
 
 
 def bench_machine(corner_tol_mm: float) -> str:
@@ -235,11 +225,17 @@ def run_benchmarks(n_blocks: int = 100_000, repeats: int = REPEATS, sizes=SIZES,
         ("cubic NURBS, 1000 points", curves_program([(p, pts, w, knots)], 10.0, start=pts[0]), m_fast),
     ):
         job = plan_job(prog, mach)
-        rate, compile_s = tick_rate(job, 20, max(3, repeats // 2))
-        ticks[name] = {"ticks_per_s": rate, "compile_s": compile_s}
+        n_ticks, stat, compile_s = tick_rate(job, 20, repeats)
+        ticks[name] = {
+            "ticks": n_ticks,
+            "ticks_per_s": n_ticks / stat.wall_min,
+            **stat.as_dict(),
+            "compile_s": compile_s,
+        }
         print(
-            f"  tick sampling t -> s -> position -> integers, {name}: {rate:,.0f} ticks/s "
-            f"(best of {max(3, repeats // 2)}; compile {compile_s:.2f} s apart)"
+            f"  tick sampling t -> s -> position -> integers, {name}: {n_ticks / stat.wall_min:,.0f} ticks/s "
+            f"(min; median {n_ticks / stat.wall_median:,.0f}; {n_ticks:,} ticks: {stat}; "
+            f"compile {compile_s:.2f} s apart)"
         )
     return {
         "info": info,

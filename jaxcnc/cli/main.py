@@ -331,7 +331,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.suite in ("all", "geometry"):
         from jaxcnc.bench.geometry import run_geometry_benchmarks
 
-        run_geometry_benchmarks(n_eval=args.points, repeats=max(1, args.repeats // 2))
+        run_geometry_benchmarks(n_eval=args.points, repeats=args.repeats)
     if args.suite in ("all", "player"):
         from jaxcnc.bench.player import run_player_benchmarks
 
