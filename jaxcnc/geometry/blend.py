@@ -173,14 +173,21 @@ def _coeffs(pts: np.ndarray) -> np.ndarray:
 
 
 def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
-    """:func:`~jaxcnc.geometry.blend_kernel.blend_kernel` on NumPy arrays, padded to a bucket."""
+    """:func:`~jaxcnc.geometry.blend_kernel.blend_kernel` on NumPy arrays, ``KERNEL_CHUNK`` blends at a time
+    (bounded working memory), each chunk padded to a bucket."""
     n = pts.shape[0]
-    m = bucket_size(n)
-    pad_pts = np.concatenate([pts, np.broadcast_to(_UNIT_BLEND, (m - n, 6, 3))])
-    pad_corner = np.concatenate([corner, np.zeros((m - n, 3))])
-    return {k: np.asarray(v)[:n] for k, v in blend_kernel(pad_pts, pad_corner).items()}
+    parts = []
+    for lo in range(0, max(n, 1), KERNEL_CHUNK):
+        hi = min(n, lo + KERNEL_CHUNK)
+        m = bucket_size(hi - lo)
+        pad_pts = np.concatenate([pts[lo:hi], np.broadcast_to(_UNIT_BLEND, (m - (hi - lo), 6, 3))])
+        pad_corner = np.concatenate([corner[lo:hi], np.zeros((m - (hi - lo), 3))])
+        parts.append({k: np.asarray(v)[: hi - lo] for k, v in blend_kernel(pad_pts, pad_corner).items()})
+    return parts[0] if len(parts) == 1 else {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
+#: Blends measured by one call of the kernel.
+KERNEL_CHUNK = 1 << 16
 #: A harmless blend (a straight quintic) for the padding rows of :func:`_kernel`.
 _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axis=1)
 

@@ -157,20 +157,25 @@ def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) 
     return tuple(np.asarray(x)[:q] for x in _boxes(arrays, which, a, d))
 
 
-def build_grid(spans: Spans, counts: np.ndarray, arrays: dict | None = None) -> Grid:
-    """Cut ``spans`` into ``counts[k]`` equal intervals each and evaluate the frame at their ends.
+def build_grid(
+    spans: Spans, counts: np.ndarray, arrays: dict | None = None, first: int = 0, last: int | None = None
+) -> Grid:
+    """Cut spans ``first..last-1`` (all by default) into ``counts[k]`` equal intervals each and evaluate the
+    frame at their ends.
 
     ``arrays``: :func:`device_spans` of ``spans`` when the caller has them already.
     """
-    n = len(spans)
-    span = np.repeat(np.arange(n), counts)
+    last = len(spans) if last is None else last
+    counts = counts[first:last]
+    span = np.repeat(np.arange(first, last), counts)
     j = np.arange(span.size) - np.repeat(np.cumsum(counts) - counts, counts)
-    step = spans.length / counts
-    s_start = j * step[span]
-    last = j == counts[span] - 1
-    s_end = np.where(last, spans.length[span], (j + 1) * step[span])  # the span's end exactly
+    local = span - first
+    step = spans.length[first:last] / counts
+    s_start = j * step[local]
+    at_end = j == counts[local] - 1
+    s_end = np.where(at_end, spans.length[span], (j + 1) * step[local])  # the span's end exactly
     delta = s_end - s_start
-    curved = is_curved(spans.kind)[span]
+    curved = is_curved(spans.kind[span])
     boxed = spans.kind[span] == SpanKind.BLEND
     t_a = np.array(spans.tangent_in[span])
     t_b = np.array(spans.tangent_out[span])

@@ -29,6 +29,11 @@ What the planner needs, without a solver:
 
 On lines (``K = 0``) every ``α_j = 1``: the steps reduce to
 ``min(B, x + D)`` and the look-ahead scan (:mod:`jaxcnc.planners.lookahead`) computes them.
+
+A long program is planned in windows (:mod:`jaxcnc.planners.topp`): :func:`solve_window` starts from the
+speed the window before reached and assumes rest after the window's end, and says up to which node that
+assumption changes nothing (the backward step there depends on its own interval alone), so a window is kept
+up to there and the next starts from that node — the same plan as the whole program at once.
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ import jax
 import jax.numpy as jnp
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.planners.lookahead import lookahead
+from jaxcnc.planners.lookahead import forward_pass
 
 #: ``|gu|`` below this is treated as 0 (the row bounds ``x`` alone).
 GU_EPS = 1e-12
@@ -201,8 +206,11 @@ def backward_scan(
     return jnp.concatenate([k, x_end[None]])
 
 
-def forward_scan(a: list, b: list, delta: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:
-    """``(m+1,)`` ``x`` at the nodes: from rest, the largest admissible ``u`` on each interval."""
+def forward_scan(
+    a: list, b: list, delta: jnp.ndarray, k: jnp.ndarray, x_start: jnp.ndarray | float = 0.0
+) -> jnp.ndarray:
+    """``(m+1,)`` ``x`` at the nodes: from ``x_start`` (rest by default), the largest admissible ``u`` on
+    each interval."""
 
     def step(x_a, row):
         ar, br, d, k_b = row
@@ -213,7 +221,7 @@ def forward_scan(a: list, b: list, delta: jnp.ndarray, k: jnp.ndarray) -> jnp.nd
         x_b = jnp.clip(x_b, 0.0, k_b)
         return x_b, x_b
 
-    x0 = jnp.minimum(jnp.zeros((), k.dtype), k[0])
+    x0 = jnp.minimum(jnp.asarray(x_start, k.dtype), k[0])
     _, x = jax.lax.scan(step, x0, (a, b, delta, k[1:]))
     return jnp.concatenate([x0[None], x])
 
@@ -234,12 +242,42 @@ def solve(
     curved: bool,
 ) -> jnp.ndarray:
     """``(m+1,)`` time-optimal ``x`` at the nodes under the rows (``curved`` static: any ``K ≠ 0``)."""
+    return solve_window(rows, delta, cap_a, x_end, curved)[0]
+
+
+def solve_window(
+    rows: Rows,
+    delta: jnp.ndarray,
+    cap_a: jnp.ndarray,
+    x_end: jnp.ndarray,
+    curved: bool,
+    x_start: jnp.ndarray | float = 0.0,
+) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """:func:`solve` from ``x_start`` at the first node, and which nodes do not depend on ``x_end``.
+
+    Returns ``(x, exact, k0)``: ``x`` ``(m+1,)``; ``exact`` ``(m,)`` bool, the backward step at node ``j``
+    took its value from the rows of interval ``j`` alone — the controllable set there would be the same for
+    any larger ``x_end`` (the step ``K_j = F_j(K_{j+1})`` is non-decreasing in ``K_{j+1}``, and here
+    ``F_j(K_{j+1}) = F_j(∞)``), so ``x`` at every node up to the last such ``j`` is that of the whole
+    program, whatever follows the window; ``k0``: the controllable set's end at the first node (below
+    ``x_start`` where the window is too short to stop from there).
+    """
     gu, gx, h = rows
+    cap_b = h[-2]
     if curved:
         x_static = static_cap(gu, gx, h, cap_a)
-        k = backward_scan(x_static, *backward_pieces(gu, gx, h, delta), x_end, h[-2])
-        return forward_scan(*forward_pieces(gu, gx, h, delta), delta, k)
+        alpha, beta = backward_pieces(gu, gx, h, delta)
+        k = backward_scan(x_static, alpha, beta, x_end, cap_b)
+        unbounded = x_static  # F_j(∞): each term with K_{j+1} replaced by its own end cap
+        for a, b in zip(alpha, beta, strict=True):
+            unbounded = jnp.minimum(unbounded, jnp.where(a > 0, a * cap_b + b, b))
+        x = forward_scan(*forward_pieces(gu, gx, h, delta), delta, k, x_start)
+        return x, k[:-1] >= unbounded, k[0]
     # Lines only (gx = 0 on the axis rows): the node caps and min(B, x + D) in both directions.
     node_cap = jnp.concatenate([cap_a, x_end[None]])
-    node_cap = node_cap.at[1:].min(h[-2])  # x_b ≤ cap_b
-    return lookahead(node_cap, line_reach(gu, h, delta))
+    node_cap = node_cap.at[1:].min(cap_b)  # x_b ≤ cap_b
+    zero = jnp.zeros((1,), delta.dtype)
+    reach = line_reach(gu, h, delta)
+    back = forward_pass(node_cap[::-1], jnp.concatenate([zero, reach[::-1]]))[::-1]
+    x = forward_pass(back.at[0].min(x_start), jnp.concatenate([zero, reach]))
+    return x, back[:-1] >= node_cap[:-1], back[0]
