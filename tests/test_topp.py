@@ -11,6 +11,7 @@ from jaxcnc.format import TableFile
 from jaxcnc.gcode import parse_gcode
 from jaxcnc.geometry import SpanKind, build_spans
 from jaxcnc.io.curves import curves_program
+from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.ticks.table import write_table
 from jaxcnc.ticks.verify import measure_table
@@ -131,3 +132,24 @@ def test_near_tangent_chain_keeps_speed_where_acceleration_allows(tmp_path):
     v_mid = blended.plan.vp[len(blended.plan) // 2]
     assert v_mid > 0.8 * v_circle
     assert blended.plan.total_time_s < exact.plan.total_time_s
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+def test_windows_plan_the_whole_program(monkeypatch, tmp_path, corner_tol):
+    """A program planned in windows of a few hundred intervals is planned as in one piece, and its table holds."""
+    import jaxcnc.planners.topp as topp
+    from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline
+
+    prog = cam_polyline(1500)
+    m = parse_machine(BENCH_MACHINE + f"corner_tol_mm = {corner_tol}\n", "<bench>")
+    whole = plan_job(prog, m).plan
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", 300)
+    job = plan_job(prog, m)
+    windowed = job.plan
+    assert len(windowed) == len(whole) > 3 * 300  # several windows
+    assert windowed.n_ticks == whole.n_ticks
+    np.testing.assert_allclose(windowed.v0, whole.v0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(windowed.vp, whole.vp, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(windowed.first_tick, whole.first_tick)
+    meas = measure_table(TableFile(write_table(job, tmp_path / "w.ticks", progress=False)), m)
+    assert meas.ok, meas.violations[:3]

@@ -20,6 +20,7 @@ What each interval is allowed (per axis ``i``, ``x = v²``):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 
 import jax
@@ -32,7 +33,7 @@ from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
 from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, junctions
-from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve
+from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve_window
 from jaxcnc.planners.registry import PlanRequest, register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
 from jaxcnc.planners.trapezoid import plan_lookahead
@@ -87,24 +88,29 @@ def jerk_cap(k_a: jnp.ndarray, k_b: jnp.ndarray, delta: jnp.ndarray, j_max: jnp.
 
 @partial(jax.jit, static_argnames=("curved_any", "axes"))
 def plan_grid(
-    g: dict, sp: dict, v_max, a_max, chord_tol, tick_hz, curved_any: bool, axes: tuple[int, ...] = (0, 1, 2), j_max=None
+    g: dict,
+    v_max,
+    a_max,
+    chord_tol,
+    tick_hz,
+    x_start,
+    curved_any: bool,
+    axes: tuple[int, ...] = (0, 1, 2),
+    j_max=None,
 ):
     """The planner as one array program over ``m`` (padded) intervals; see the module docstring.
 
-    ``g`` holds the grid (``span, delta, t_a, k_a, t_b, k_b, curved, feed, dwell``), ``sp`` the span
-    arrays the junctions need (``kind, tangent_in, tangent_out, stop_before``). ``axes``: the axes
-    whose acceleration rows can bind (finite limit, some motion): the others' rows are ``0 ≤ A`` and
-    are left out (a planar program on a three-axis machine has two thirds of the rows).
+    ``g`` holds the grid (``delta, t_a, k_a, t_b, k_b, curved, boxed`` and the box, ``feed, dwell``, the
+    holds) and what the junctions give each interval: ``at_kink`` (its span starts or ends at a kink passed
+    with a velocity step), ``is_point``, ``cap_first`` / ``cap_last`` (the junction's cap on ``x`` where the
+    interval starts / ends its span, ``inf`` inside). ``x_start``: ``x`` at the first node (0 at the program's
+    start). ``axes``: the axes whose acceleration rows can bind (finite limit, some motion): the others'
+    rows are ``0 ≤ A`` and are left out (a planar program on a three-axis machine has two thirds of the
+    rows). Returns the segments' trapezoids, ``x_node``, ``acc`` and :func:`~.phaseplane.solve_window`'s
+    ``exact`` and ``k0``.
     """
-    at_kink, j_cap = junctions(sp["kind"], sp["tangent_in"], sp["tangent_out"], sp["stop_before"], a_max, tick_hz)
-    span, curved = g["span"], g["curved"]
-    n = sp["kind"].shape[0]
-    first = jnp.concatenate([jnp.ones(1, bool), span[1:] != span[:-1]])
-    last = jnp.concatenate([span[1:] != span[:-1], jnp.ones(1, bool)])
-    # junction caps at the span ends (0 before the first and after the last span: rest)
-    cap_start = jnp.concatenate([jnp.zeros(1), j_cap])
-    cap_end = jnp.concatenate([j_cap, jnp.zeros(1)])
-    share = jnp.where(at_kink[span], 1.0 - JUNCTION_SHARE, 1.0) * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
+    curved = g["curved"]
+    share = jnp.where(g["at_kink"], 1.0 - JUNCTION_SHARE, 1.0) * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
     acc = jnp.minimum(a_max, BIG)[None, :] * share[:, None]
     vel = jnp.minimum(v_max, BIG)[None, :] * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)[:, None]
     vcap_a = speed_cap(g["t_a"], g["k_a"], vel, g["feed"], chord_tol, tick_hz)
@@ -113,20 +119,19 @@ def plan_grid(
     vcap_box = box_speed_cap(g["t_lo"], g["t_hi"], vel, g["feed"])
     vcap_a = jnp.where(g["boxed"], jnp.minimum(vcap_a, vcap_box), vcap_a)
     vcap_b = jnp.where(g["boxed"], jnp.minimum(vcap_b, vcap_box), vcap_b)
-    is_point = sp["kind"][span] == SpanKind.POINT
-    cap_a = jnp.where(is_point, 0.0, jnp.where(first, jnp.minimum(vcap_a, cap_start[span]), vcap_a))
-    cap_b = jnp.where(is_point, 0.0, jnp.where(last, jnp.minimum(vcap_b, cap_end[jnp.clip(span, 0, n - 1)]), vcap_b))
+    is_point = g["is_point"]
+    cap_a = jnp.where(is_point, 0.0, jnp.minimum(vcap_a, g["cap_first"]))
+    cap_b = jnp.where(is_point, 0.0, jnp.minimum(vcap_b, g["cap_last"]))
     cap_a, cap_b = jnp.minimum(cap_a, g["hold_a"]), jnp.minimum(cap_b, g["hold_b"])  # requested holds (nodes)
     if j_max is not None:  # jerk limits: the curvature may change only so fast at speed
         x_jerk = jerk_cap(g["k_a"], g["k_b"], g["delta"], j_max)
         cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
     delta = g["delta"]
-    box = (g["boxed"], g["t_lo"], g["t_hi"], g["k_lo"], g["k_hi"])
     ax = list(axes)
-    box = (box[0],) + tuple(b[:, ax] for b in box[1:])
+    box = (g["boxed"],) + tuple(g[f][:, ax] for f in ("t_lo", "t_hi", "k_lo", "k_hi"))
     t_a, k_a, t_b, k_b = (g[f][:, ax] for f in ("t_a", "k_a", "t_b", "k_b"))
     rows = constraint_rows(delta, t_a, k_a, t_b, k_b, acc[:, ax], cap_b, box)
-    x_node = solve(rows, delta, cap_a, jnp.zeros(()), curved_any)
+    x_node, exact, k0 = solve_window(rows, delta, cap_a, jnp.zeros(()), curved_any, x_start)
     x0, x1 = x_node[:-1], x_node[1:]
     # Lines: a trapezoid under the span's speed cap with the axes' tangential budget.
     # Curved intervals: x linear in s between the nodes (constant s̈), as planned.
@@ -134,10 +139,22 @@ def plan_grid(
     a_line = line_reach(rows[0], rows[2], delta) / two_d
     x_cap = jnp.where(curved, jnp.maximum(x0, x1), jnp.minimum(vcap_a, vcap_b))
     a_seg = jnp.where(curved, jnp.abs(x1 - x0) / two_d, a_line)
-    prof = trapezoids(x_node, x_cap, a_seg, delta, g["dwell"])
-    out = align_to_ticks(prof, x0 == 0.0, tick_hz)
-    out["x_node"], out["acc"] = x_node, acc
+    out = trapezoids(x_node, x_cap, a_seg, delta, g["dwell"])
+    out.update(x_node=x_node, acc=acc, exact=exact, k0=k0)
     return out
+
+
+@jax.jit
+def _junction_facts(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz):
+    """:func:`~jaxcnc.planners.limits.junctions` of the whole program (padded span arrays)."""
+    return junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
+
+
+@jax.jit
+def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
+    """:func:`~jaxcnc.planners.timelaw.align_to_ticks`, returning only what it adds to the segments."""
+    out = align_to_ticks(prof, rest_start, tick_hz)
+    return {k: out[k] for k in ("group_tick", "offset_ticks", "first_tick", "n_ticks")}
 
 
 def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray) -> np.ndarray:
@@ -169,24 +186,123 @@ def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarra
 
 @register_planner("topp")
 def plan_topp(req: PlanRequest) -> Plan:
-    """Plan with exact per-axis coupling on a fine grid (see the module docstring)."""
+    """Plan with exact per-axis coupling on a fine grid (see the module docstring).
+
+    The grid is planned in windows of about ``WINDOW_INTERVALS`` intervals (all at once when it is
+    smaller): each starts from the speed the one before reached and is kept up to its last node that does
+    not depend on what follows it (:func:`~jaxcnc.planners.phaseplane.solve_window`) — the whole program's
+    plan, in bounded working memory.
+    """
     spans = req.spans
     if not is_curved(spans.kind).any() and (req.hold_caps is None or len(req.hold_caps) == 0):
         # lines only: one interval per line, where the rows reduce to the look-ahead planner's span caps
         # and junction caps — the same plan from span arrays alone, without a grid
         return plan_lookahead(req)
+    n = len(spans)
     counts = hold_counts(req, interval_counts(spans))
-    arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all rounds
+    arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all windows
+    facts = _ProgramFacts.of(req)
+    pieces = []
+    first, x_start, window = 0, 0.0, WINDOW_INTERVALS
+    while first < n:
+        reach = np.cumsum(counts[first:])
+        last = min(n, first + max(1, int(np.searchsorted(reach, window, side="right"))))
+        grid, out = _solve_refined(req, facts, counts, arrays, first, last, x_start)
+        m = len(grid)
+        if last == n:
+            commit = m  # the program ends at rest: every node is the whole program's
+        else:
+            starts = np.flatnonzero(out["exact"][:m] & (grid.s_start == 0))
+            starts = starts[starts > 0]
+            enough = out["k0"] >= x_start * (1.0 - 1e-9) - 1e-9  # the window can stop from x_start
+            if not (enough and starts.size):
+                window *= 2  # no node of this window is settled yet: look further ahead
+                continue
+            commit = int(starts[-1])
+        pieces.append(_segments(out, grid, commit))
+        x_start = float(out["x_node"][commit])
+        first = int(grid.span[commit]) if commit < m else n
+        window = WINDOW_INTERVALS
+    return _plan_of(pieces, req.machine.tick_hz)
+
+
+#: Intervals planned at once; a longer program is planned window by window (the same plan).
+WINDOW_INTERVALS = 1 << 17
+_SEGMENT_KEYS = ("v0", "vp", "v1", "t_acc", "t_cru", "t_dec", "a_acc", "a_dec")
+
+
+@dataclass(frozen=True, eq=False)
+class _ProgramFacts:
+    """What every window needs from the whole program: the junctions and the moving axes."""
+
+    at_kink: np.ndarray
+    cap_start: np.ndarray
+    cap_end: np.ndarray
+    is_point: np.ndarray
+    axes: tuple[int, ...]
+
+    @staticmethod
+    def of(req: PlanRequest) -> _ProgramFacts:
+        spans = req.spans
+        n = len(spans)
+        nb = bucket_size(n)
+        keep = 1.0 - NUMERIC_MARGIN
+        at_kink, j_cap = _junction_facts(
+            pad_rows(spans.kind, nb, SpanKind.POINT),
+            pad_rows(spans.tangent_in, nb, 0.0),
+            pad_rows(spans.tangent_out, nb, 0.0),
+            pad_rows(req.stop_before, nb, True),
+            np.asarray(req.a_max) * keep,
+            req.machine.tick_hz,
+        )
+        j_cap = np.asarray(j_cap)[: n - 1]
+        zero = np.zeros(1)
+        moves = np.any(spans.hi - spans.lo > 0, axis=0) & np.isfinite(req.a_max)
+        return _ProgramFacts(
+            at_kink=np.asarray(at_kink)[:n],
+            cap_start=np.concatenate([zero, j_cap]),  # rest before the first span and after the last
+            cap_end=np.concatenate([j_cap, zero]),
+            is_point=spans.kind == SpanKind.POINT,
+            axes=tuple(int(i) for i in np.flatnonzero(moves)),
+        )
+
+
+def _solve_refined(
+    req: PlanRequest, facts: _ProgramFacts, counts: np.ndarray, arrays, first: int, last: int, x_start: float
+) -> tuple[Grid, dict[str, np.ndarray]]:
+    """Grid and plan of spans ``first..last-1``, cutting curved spans finer (``counts``, in place) until the
+    interior check passes."""
     for _ in range(MAX_REFINE):
-        grid = build_grid(spans, counts, arrays)
-        out = _solve_grid(req, grid)
+        grid = build_grid(req.spans, counts, arrays, first, last)
+        out = _solve_grid(req, facts, grid, x_start)
         bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], out["acc"][: len(grid)])
         if not bad.any():
-            break
-        counts = counts * np.where(np.isin(np.arange(len(spans)), grid.span[bad]), REFINE_FACTOR, 1)
-    else:
-        raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
-    return plan_from_outputs(out, grid.delta, grid.span, grid.s_start, req.machine.tick_hz)
+            return grid, out
+        counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
+    raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
+
+
+def _segments(out: dict[str, np.ndarray], grid: Grid, commit: int) -> dict[str, np.ndarray]:
+    """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
+    seg = {k: out[k][:commit] for k in _SEGMENT_KEYS}
+    seg.update(
+        rest=out["x_node"][:commit] == 0.0,
+        length=grid.delta[:commit],
+        span=grid.span[:commit],
+        s_start=grid.s_start[:commit],
+    )
+    return seg
+
+
+def _plan_of(pieces: list[dict[str, np.ndarray]], tick_hz: float) -> Plan:
+    """One :class:`Plan` of the windows' segments: aligned to ticks over the whole program."""
+    seg = {k: np.concatenate([p.pop(k) for p in pieces]) for k in list(pieces[0])}  # each window's freed at once
+    n = seg["length"].shape[0]
+    mb = bucket_size(n)
+    prof = {k: pad_rows(seg[k], mb, 0.0) for k in _SEGMENT_KEYS}
+    out = jax.device_get(_align(prof, pad_rows(seg["rest"], mb, True), tick_hz))
+    out.update({k: seg[k] for k in _SEGMENT_KEYS})
+    return plan_from_outputs(out, seg["length"], seg["span"], seg["s_start"], tick_hz)
 
 
 def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
@@ -233,22 +349,17 @@ def _ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return which, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
 
 
-def moving_axes(grid: Grid, a_max: np.ndarray) -> tuple[int, ...]:
-    """The axes with a finite acceleration limit along which some interval moves or curves."""
-    moves = np.zeros(len(a_max), bool)
-    for f in (grid.t_a, grid.t_b, grid.k_a, grid.k_b, grid.t_lo, grid.t_hi, grid.k_lo, grid.k_hi):
-        moves |= np.any(f != 0, axis=0)
-    return tuple(int(i) for i in np.flatnonzero(moves & np.isfinite(a_max)))
-
-
-def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
+def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: float) -> dict[str, np.ndarray]:
     """Pad the grid to a bucket, run :func:`plan_grid`, return its outputs as NumPy arrays."""
-    spans, machine = req.spans, req.machine
-    n, m = len(spans), len(grid)
-    mb, nb = bucket_size(m), bucket_size(n + 1)  # room for the padding point span n
+    machine = req.machine
+    m = len(grid)
+    mb = bucket_size(m)
     s = grid.span
+    first = grid.s_start == 0
+    last = np.concatenate([s[1:] != s[:-1], [True]])
+    cap_first = np.where(first, facts.cap_start[s], np.inf)
+    cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
     g = {
-        "span": pad_rows(s, mb, n - 1),
         "delta": pad_rows(grid.delta, mb, 0.0),
         "t_a": pad_rows(grid.t_a, mb, 0.0),
         "k_a": pad_rows(grid.k_a, mb, 0.0),
@@ -261,29 +372,26 @@ def _solve_grid(req: PlanRequest, grid: Grid) -> dict[str, np.ndarray]:
         "k_lo": pad_rows(grid.k_lo, mb, 0.0),
         "k_hi": pad_rows(grid.k_hi, mb, 0.0),
         "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
-        "dwell": pad_rows(np.where(grid.s_start == 0, req.dwell_s[s], 0.0), mb, 0.0),
+        "dwell": pad_rows(np.where(first, req.dwell_s[s], 0.0), mb, 0.0),
+        # padding intervals: points at rest after the window
+        "at_kink": pad_rows(facts.at_kink[s], mb, False),
+        "is_point": pad_rows(facts.is_point[s], mb, True),
+        "cap_first": pad_rows(cap_first, mb, 0.0),
+        "cap_last": pad_rows(np.where(last, facts.cap_end[s], np.inf), mb, 0.0),
     }
     hold_a, hold_b = node_holds(req, grid)
     g["hold_a"], g["hold_b"] = pad_rows(hold_a, mb, np.inf), pad_rows(hold_b, mb, np.inf)
-    # padding intervals sit on a padding point span after the program
-    g["span"][m:] = n
-    sp = {
-        "kind": pad_rows(spans.kind, nb, SpanKind.POINT),
-        "tangent_in": pad_rows(spans.tangent_in, nb, 0.0),
-        "tangent_out": pad_rows(spans.tangent_out, nb, 0.0),
-        "stop_before": pad_rows(req.stop_before, nb, True),
-    }
     keep = 1.0 - NUMERIC_MARGIN
     j_max = req.j_max
     out = plan_grid(
         g,
-        sp,
         np.asarray(req.v_max) * keep,
         np.asarray(req.a_max) * keep,
         machine.path.chord_tol_mm,
         machine.tick_hz,
+        x_start,
         curved_any=bool(grid.curved.any()),
-        axes=moving_axes(grid, req.a_max),
+        axes=facts.axes,
         j_max=np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}
