@@ -29,12 +29,12 @@ def table(tmp_path_factory):
 
 def test_frames_round_trip_and_damage_is_detected():
     rows = np.arange(12, dtype=np.int32).reshape(4, 3)
-    f = Frame(DATA, 3, 7, 100, 4, 0, rows)
+    f = Frame(DATA, 3, session=9, seq=7, tick=100, count=4, rows=rows)
     g = decode(f.encode())
-    assert (g.type, g.seq, g.tick, g.count) == (DATA, 7, 100, 4)
+    assert (g.type, g.session, g.seq, g.tick, g.count) == (DATA, 9, 7, 100, 4)
     np.testing.assert_array_equal(g.rows, rows)
     data = bytearray(f.encode())
-    for spot in (0, 10, 30, len(data) - 1):
+    for spot in (0, 10, 30, 50, len(data) - 1):
         bad = bytearray(data)
         bad[spot] ^= 0x40
         with pytest.raises(ProtocolError):
@@ -43,15 +43,25 @@ def test_frames_round_trip_and_damage_is_detected():
         decode(bytes(data[:20]))
 
 
+def _hello(r: Receiver, n_axes: int = 2) -> Frame:
+    w = decode(r.handle(Frame(HELLO, n_axes, seq=1, count=10, aux=1_000_000, nonce=5).encode(), "p").data)
+    assert (w.type, w.nonce) == (WELCOME, 5) and w.session != 0
+    return w
+
+
 def test_receiver_takes_each_tick_once_in_order():
     r = Receiver(capacity=100)
-    assert r.on_frame(Frame(HELLO, 2, 0, 0, 10, 1_000_000)).type == WELCOME
+    s = _hello(r).session
     rows = np.arange(20, dtype=np.int32).reshape(10, 2)
-    assert r.on_frame(Frame(DATA, 2, 1, 4, 4, 0, rows[4:8])).tick == 0  # a gap: dropped, still needs 0
-    ack = r.on_frame(Frame(DATA, 2, 0, 0, 4, 0, rows[:4]))
+
+    def data(seq, tick, part):
+        return decode(r.handle(Frame(DATA, 2, s, seq, tick, len(part), rows=part).encode(), "p").data)
+
+    assert data(2, 4, rows[4:8]).tick == 0  # a gap: dropped, still needs 0
+    ack = data(3, 0, rows[:4])
     assert (ack.type, ack.tick, ack.count) == (ACK, 4, 96)
-    assert r.on_frame(Frame(DATA, 2, 0, 0, 4, 0, rows[:4])).tick == 4  # duplicate: ignored
-    assert r.on_frame(Frame(DATA, 2, 1, 4, 6, 0, rows[4:])).tick == 10
+    assert data(4, 0, rows[:4]).tick == 4  # duplicate: ignored
+    assert data(5, 4, rows[4:]).tick == 10
     assert r.stats["gaps"] == 1 and r.stats["duplicates"] == 1
 
 

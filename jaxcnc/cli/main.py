@@ -205,6 +205,15 @@ def cmd_play(args: argparse.Namespace) -> int:
         options = {"record": args.record, "realtime": args.realtime, "a_max": a_max}
     elif args.sink in ("halstreamer", "hal"):
         options = {"record": args.record}
+    elif args.sink.startswith(("tcp://", "udp://")):
+        from jaxcnc.hw.stream import load_key
+
+        try:  # from a file or $JAXCNC_STREAM_KEY, never from the command line
+            options = {"key": load_key(args.key_file)}
+        except ValueError as exc:
+            raise JaxcncError(str(exc)) from None
+    if args.key_file and not args.sink.startswith(("tcp://", "udp://")):
+        raise JaxcncError("--key-file is for the stream sinks (tcp://, udp://)")
     sink = open_sink(args.sink, **options)
     bar = _progress_bar(total=table.n_rows, unit="tick", unit_scale=True, desc="playing", disable=args.quiet or None)
     last = [0]
@@ -431,6 +440,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--record", help="sim, halstreamer: save the executed drive positions (halstreamer: as sampled) to this .npy"
     )
     sp.add_argument("--realtime", action="store_true", help="sim: run the virtual clock in wall-clock time")
+    sp.add_argument(
+        "--key-file",
+        help="tcp://, udp://: a file holding the shared key that signs every frame (the receiver's; at least "
+        "16 bytes); else $JAXCNC_STREAM_KEY if set. Never give a key on the command line",
+    )
     sp.add_argument(
         "--machine",
         "-m",

@@ -57,6 +57,33 @@ class DriveClock:
         self.hard_stops = 0  # the buffer ended before the ramp reached rest (or no a_max)
         self.held_ticks = 0  # servo ticks spent at rest waiting for rows
         self._down = False  # ramping down (or at rest) for want of rows
+        self.stopping = False  # stop(): ramping down for good
+
+    def stop(self) -> None:
+        """Stop for good (an abort, a lost player): from now the rate ramps to 0 within the buffered
+        rows and stays there; rows left in the buffer are never taken. Without ``a_max`` the drives
+        stop at once (a hard stop)."""
+        if not self.stopping and self.rate > 0 and self.a_max is None:
+            self.hard_stops += 1
+        self.stopping = True
+
+    @property
+    def at_rest(self) -> bool:
+        """The drives stand still: rate 0, or every row taken."""
+        return self.rate == 0.0 or (self.queued == 0 and self.frac == 0.0)
+
+    def run_to_rest(self, positions: bool = False, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+        """After :meth:`stop`: run the servo ticks of the ramp-down (virtually); rows taken and positions."""
+        taken, pos = [], []
+        while not self.at_rest:
+            t, p = self.run(chunk, False, positions)
+            taken.append(t)
+            pos.append(p)
+        empty = np.zeros((0, self.n_axes))
+        return (
+            np.concatenate(taken) if taken else empty.astype(np.int32),
+            np.concatenate(pos) if pos else empty,
+        )
 
     def push(self, rows: np.ndarray) -> None:
         """Append rows (the next table ticks) to the buffer."""
@@ -111,7 +138,7 @@ class DriveClock:
         left = ticks
         while left > 0:
             keep = (0 if ended else self.reserve) + (self.frac > 0.0)  # an interpolation needs the next row
-            if self.rate == 1.0 and self.queued > keep:
+            if self.rate == 1.0 and self.queued > keep and not self.stopping:
                 k = min(left, self.queued - keep)  # as planned: one row per tick, vectorised
                 rows = self._take(k)
                 taken.append(rows)
@@ -125,7 +152,10 @@ class DriveClock:
                 continue
             if self.queued == 0 and ended:
                 break  # the job is done
-            if ended or self.queued >= self.resume:
+            if self.stopping:
+                target = 0.0
+                ended = False  # the rows left are not the job's end: the ramp must fit them
+            elif ended or self.queued >= self.resume:
                 target, self._down = 1.0, False
             elif self.queued < max(self.reserve, 1):
                 if not self._down:

@@ -171,6 +171,9 @@ class Player:
                     warp.tau = float(max(row - 1, 0))
                 if warp.done:
                     break
+                if parked and self._stop.is_set():  # a stop while held at rest: done, at once
+                    stopped = True
+                    break
                 target = self.commanded_rate
                 if target > 0.0 and parked and warp.rate == 0.0:  # leaving a hold: the laser first
                     sink_ev = self._laser_event(out, *laser) if laser[0] > 0 else np.zeros(0, EVENT_DTYPE)
@@ -196,8 +199,10 @@ class Player:
                 out += k
                 if stopped:
                     break
-        finally:
-            sink.close()
+        except BaseException:
+            abort_sink(sink)  # the laser off, the drives brought to rest on the path; then the error
+            raise
+        sink.close()
         if progress:
             progress(sink.executed_tick() + 1)
         return PlayResult(
@@ -209,23 +214,49 @@ class Player:
         )
 
 
+def abort_sink(sink: Sink) -> None:
+    """The way out on an error or a signal: the sink's ``abort`` (laser off at once, drives ramped down
+    on the path within the buffered rows, the recording finished), else its ``close``. Never raises:
+    the error that brought the player here is the one reported."""
+    try:
+        abort = getattr(sink, "abort", None)
+        if abort is not None:
+            abort()
+        else:
+            sink.close()
+    except Exception:  # noqa: BLE001 - the original error is the one to report
+        pass
+
+
 def _laser_state(events: np.ndarray, state: tuple[float, int]) -> tuple[float, int]:
     """The laser (power, mode) after ``events``, given ``state`` before them."""
     laser = events[events["kind"] == EventKind.LASER]
     return (float(laser["value"][-1]), int(laser["aux"][-1])) if laser.size else state
 
 
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
 @contextmanager
 def sigint_stops(player: Player):
-    """While the block runs, Ctrl-C asks ``player`` for a controlled stop (main thread, with limits)."""
-    if player.a_max is None or threading.current_thread() is not threading.main_thread():
+    """While the block runs (main thread), Ctrl-C, SIGTERM and SIGHUP ask ``player`` for a controlled
+    stop when it has limits; without limits they interrupt the play (the sink is aborted: the laser
+    off, the drives stopped on the path). A second signal during a controlled stop aborts at once."""
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, lambda *_: player.request_stop())
+
+    def on_signal(*_) -> None:
+        if player.a_max is None or player._stop.is_set():
+            raise KeyboardInterrupt
+        player.request_stop()
+
+    previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def play(

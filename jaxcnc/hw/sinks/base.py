@@ -33,3 +33,9 @@ class Sink(Protocol):
 
     def close(self) -> None:
         """Run the buffer to its end and release the sink."""
+
+    # Optional: ``abort(self) -> None`` — stop now, on the player's error or a signal: the laser off at
+    # once, the drives brought to rest on the path (ramped down within the buffered rows where the sink
+    # can, else held), the rows left unexecuted, the recording finished and the sink released; never
+    # raises. The player calls it instead of ``close`` on every way out but the normal end; a sink
+    # without it is closed.

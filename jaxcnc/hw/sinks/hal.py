@@ -21,8 +21,13 @@ job; :attr:`underruns` reports them after ``close``.
 
 As root, LinuxCNC's ``rtapi_app`` drops to ``RTAPI_UID`` (the sink uses the first ordinary user,
 or ``nobody``) and listens on the socket ``RTAPI_FIFO_PATH`` (the sink puts it in a private
-directory that user can write). One HAL session runs per machine: the sink refuses to start if
-one is running already (``halrun -U`` ends it).
+directory that user can write). One HAL session runs per machine: the sink takes a machine-wide
+lock (``flock`` on ``LOCK_PATH``) before it looks for a running session and holds it until the
+session has ended, so two players can never both start one; it refuses to start if one is running
+already (``halrun -U`` ends one that was not started by jaxcnc).
+
+On an abort (the player's error or a signal) the laser's power passes a gate (``mult2``) that is
+closed at once, and the streamer is disabled: the drives hold the last executed row.
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ from jaxcnc.format import EventKind, TableHeader
 from jaxcnc.hw.sinks.record import RowRecorder
 
 REALTIME = "/usr/lib/linuxcnc/realtime"
+#: held (flock) by the process whose sink runs the machine's HAL session: the guard against a second one
+LOCK_PATH = os.path.join(tempfile.gettempdir(), "jaxcnc-hal.lock")
 TOOLS = ("halcmd", "halstreamer", "halsampler")
 #: System V keys of the FIFOs of streamer.0 ('HST0') and sampler.0 ('HSA0')
 STREAM_KEYS = ("0x48535430", "0x48534130")
@@ -69,7 +76,7 @@ def _rtapi_uid() -> int:
 
 
 def hal_config(n_axes: int, depth: int, period_ns: int) -> str:
-    """The HAL file: streamer → sampler (gated on fresh data), one servo thread."""
+    """The HAL file: streamer → sampler (gated on fresh data), the laser through a gate, one servo thread."""
     cfg = "s" * n_axes + "f"
     lines = [
         f"loadrt threads name1=servo period1={period_ns}",
@@ -77,7 +84,9 @@ def hal_config(n_axes: int, depth: int, period_ns: int) -> str:
         f"loadrt sampler depth={4 * depth} cfg={cfg}s",
         "loadrt not count=1",
         "loadrt and2 count=1",
+        "loadrt mult2 count=1",
         "addf streamer.0 servo",
+        "addf mult2.0 servo",
         "addf not.0 servo",
         "addf and2.0 servo",
         "addf sampler.0 servo",
@@ -86,8 +95,13 @@ def hal_config(n_axes: int, depth: int, period_ns: int) -> str:
         "net fresh not.0.out and2.0.in1",
         "net record and2.0.out sampler.0.enable",
         "sets run 0",
+        # the laser power passes a gate the sink closes on an abort (laser off at once)
+        f"net laser-cmd streamer.0.pin.{n_axes} mult2.0.in0",
+        "net laser-enable mult2.0.in1",
+        "sets laser-enable 1",
+        f"net col{n_axes} mult2.0.out sampler.0.pin.{n_axes}",
     ]
-    lines += [f"net col{k} streamer.0.pin.{k} sampler.0.pin.{k}" for k in range(n_axes + 1)]
+    lines += [f"net col{k} streamer.0.pin.{k} sampler.0.pin.{k}" for k in range(n_axes)]
     lines += [f"net underruns streamer.0.underruns sampler.0.pin.{n_axes + 1}", "start"]
     return "\n".join(lines) + "\n"
 
@@ -125,6 +139,8 @@ class HalStreamerSink:
         self._first_underruns: int | None = None
         self._procs: list[subprocess.Popen] = []
         self._hal_up = False
+        self._lock_fd: int | None = None
+        self.laser_at_end: float | None = None  # after an abort: the laser output HAL reports
 
     # ---- HAL session -------------------------------------------------------------------------
     def _env(self) -> dict:
@@ -165,19 +181,42 @@ class HalStreamerSink:
         if rc != 0:
             raise JaxcncError(f"halstreamer sink: halcmd {' '.join(args)} failed: {text}")
 
+    def _lock(self) -> None:
+        """Take the machine-wide session lock, or refuse: two sinks can never both find no session
+        running and both start one (the check and the start happen under the lock)."""
+        import fcntl
+
+        fd = os.open(LOCK_PATH, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise JaxcncError(
+                "halstreamer sink: a LinuxCNC realtime session is already running (another jaxcnc play)"
+            ) from None
+        self._lock_fd = fd
+
+    def _unlock(self) -> None:
+        fd, self._lock_fd = self._lock_fd, None
+        if fd is not None:
+            os.close(fd)  # releases the flock
+
     def open(self, header: TableHeader) -> None:
         self.header = header
         n = header.n_axes
         self._ncols = n + 2
+        self._lock()
         self._hal_env = self._env()
         if self._run(REALTIME, "status")[0] == 0:
             shutil.rmtree(self._tmp, ignore_errors=True)
+            self._unlock()
             raise JaxcncError("halstreamer sink: a LinuxCNC realtime session is already running (end it: halrun -U)")
         self._remove_stale_fifos()
         period = self.period_ns or round(1e9 / header.tick_hz)
         rc, text = self._run(REALTIME, "start")
         if rc != 0:
             shutil.rmtree(self._tmp, ignore_errors=True)
+            self._unlock()
             raise JaxcncError(f"halstreamer sink: LinuxCNC realtime did not start: {text}")
         self._hal_up = True
         try:
@@ -332,7 +371,42 @@ class HalStreamerSink:
         finally:
             self._shutdown()
 
-    def _shutdown(self) -> None:
+    def abort(self) -> None:
+        """Stop now: the laser gate closed at once, the streamer disabled (the stock streamer cannot
+        ramp: the drives hold the last executed row — on the path, at rest), the sampled rows kept;
+        then the session ends. Never raises."""
+        try:
+            if self._hal_up and self._procs:
+                self._run("halcmd", "sets", "laser-enable", "0")
+                self._run("halcmd", "sets", "run", "0")
+                rc, text = self._run("halcmd", "getp", "mult2.0.out")
+                try:
+                    self.laser_at_end = float(text.split()[-1]) if rc == 0 else None
+                except (ValueError, IndexError):
+                    self.laser_at_end = None
+                self._settle()
+                self._stop_procs()
+                self._reader.join(2.0)
+                self.recorded = self._rec.close()
+                if self._laser_rows is not None:
+                    self.laser_power = np.concatenate(self._laser_rows) if self._laser_rows else np.zeros(0)
+        except Exception:  # noqa: BLE001 - best effort: the session is ended below in any case
+            pass
+        finally:
+            self._shutdown()
+
+    def _settle(self, quiet_s: float = 0.2, limit_s: float = 2.0) -> None:
+        """Wait until the samples already taken have come back (no new one for ``quiet_s``)."""
+        end = time.monotonic() + limit_s
+        with self._cond:
+            seen = self._executed
+            while time.monotonic() < end:
+                self._cond.wait(quiet_s)
+                if self._executed == seen:
+                    return
+                seen = self._executed
+
+    def _stop_procs(self) -> None:
         for p in self._procs:
             if p.poll() is None:
                 p.terminate()
@@ -340,7 +414,11 @@ class HalStreamerSink:
                     p.wait(5)
                 except subprocess.TimeoutExpired:
                     p.kill()
+                    p.wait()
         self._procs = []
+
+    def _shutdown(self) -> None:
+        self._stop_procs()
         if self._hal_up:
             self._run("halcmd", "unload", "all")
             self._run(REALTIME, "stop")
@@ -348,3 +426,4 @@ class HalStreamerSink:
             self._hal_up = False
         if getattr(self, "_tmp", None):
             shutil.rmtree(self._tmp, ignore_errors=True)
+        self._unlock()

@@ -69,6 +69,12 @@ class ScannerSink:
     def executed_tick(self) -> int:
         return self.executed
 
+    def abort(self) -> None:
+        """Stop now: lists not yet started are discarded (a board stops at the end of the list it runs)."""
+        if hasattr(self, "_rec"):
+            self.loading, self.loaded, self.ready = [], 0, None
+            self.recorded = self._rec.close()
+
     def close(self) -> None:
         self._close_list()
         if self.ready is not None:

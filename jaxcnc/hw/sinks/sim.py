@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxcnc.format import EVENT_DTYPE, TableHeader
+from jaxcnc.format import EVENT_DTYPE, EventKind, TableHeader
 from jaxcnc.hw.drives import DriveClock
 from jaxcnc.hw.sinks.record import RowRecorder
 
@@ -99,6 +99,24 @@ class SimSink:
 
     def executed_tick(self) -> int:
         return self.clock.executed
+
+    def abort(self) -> None:
+        """Stop now (the player's error or signal): the laser off at the next tick, the drives ramped
+        down on the path within the buffered rows (held at once without ``a_max``), the rows left in
+        the buffer never executed, the recording finished."""
+        if not hasattr(self, "clock"):
+            return
+        off = self.clock.executed + 1
+        self.events = [e[e["tick"] <= off] for e in self.events]  # what was queued after is never played
+        stop = np.zeros(1, EVENT_DTYPE)
+        stop["tick"], stop["kind"] = off, EventKind.LASER
+        self.events.append(stop)
+        self.clock.stop()
+        taken, pos = self.clock.run_to_rest(positions=self.trace is not None)
+        self._rec.append(taken)
+        if self.trace is not None:
+            self.trace.append(pos)
+        self.recorded = self._rec.close()
 
     def close(self) -> None:
         while self.clock.queued:  # the rest of the buffer (after a ramp-down, ramping up first)
