@@ -468,10 +468,125 @@ def test_stop_during_a_hold_from_the_command_line_exits_130(job, tmp_path):
     assert np.all(rows[-1] == rows[-2]) and np.all(np.diff(rows[:, 0]) >= 0)
 
 
+# ---- the shared key, the version, the address --------------------------------------------------
+
+
 @pytest.fixture(autouse=True)
 def _no_stray_env(monkeypatch):
     monkeypatch.delenv("JAXCNC_STREAM_KEY", raising=False)
     yield
 
 
-_ = os  # (used by later tests)
+@pytest.mark.parametrize("scheme", ["tcp", "udp"])
+def test_a_keyed_session_plays_and_a_wrong_or_missing_key_is_refused(job, tmp_path, scheme):
+    """The receiver takes its key from $JAXCNC_STREAM_KEY, the player from --key-file: the job plays
+    whole. A player with another key, or none, is refused in one line (exit 2) and moves nothing."""
+    m, table, a_max, _ = job
+    key = tmp_path / "key"
+    key.write_text("correct horse battery staple\n")
+    wrong = tmp_path / "wrong"
+    wrong.write_text("incorrect horse battery staple")
+    rec = tmp_path / "rec.npy"
+    env = {**os.environ, "JAXCNC_STREAM_KEY": "correct horse battery staple"}
+    proc, addr = spawn(
+        f"{scheme}://127.0.0.1:0", "--record", str(rec), "--speed", "10", "--idle-timeout", "20", env=env
+    )
+    try:
+        for extra, what in ((("--key-file", str(wrong)), "shared key"), ((), "shared key")):
+            bad = _play_cli(table.path, addr, *extra)
+            _, err = bad.communicate(timeout=60)
+            assert bad.returncode == 2, err
+            _one_line_error(err)
+            assert what in err, err
+        good = _play_cli(table.path, addr, "--key-file", str(key))
+        _, err = good.communicate(timeout=60)
+        assert good.returncode == 0, err
+        out, rerr = proc.communicate(timeout=30)
+    finally:
+        _kill(proc)
+    got = _summary(out)
+    assert got["executed"] == table.n_rows and got["bad_auth"] >= 2
+    np.testing.assert_array_equal(np.load(rec), table.positions)
+
+
+def test_a_short_key_is_refused_in_one_line(job, tmp_path):
+    m, table, a_max, _ = job
+    key = tmp_path / "key"
+    key.write_text("short")
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "jaxcnc",
+            "play",
+            str(table.path),
+            "--sink",
+            "tcp://127.0.0.1:9",
+            "--key-file",
+            str(key),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2
+    _one_line_error(r.stderr)
+    assert "at least 16" in r.stderr
+
+
+def test_another_protocol_version_is_a_one_line_error_on_both_sides(job):
+    """A v1 player's HELLO is refused by the receiver (one line on its stderr); a player talking to a
+    board of version 3 says so in one line."""
+    import struct
+    import zlib
+
+    m, table, a_max, _ = job
+    proc, addr = spawn("tcp://127.0.0.1:0", "--idle-timeout", "2")
+    try:
+        old = struct.pack("<HBBIqIq", 0x4A43, HELLO, 3, 0, 0, 10, 10_000_000)  # the version 1 HELLO
+        old += struct.pack("<I", zlib.crc32(old))
+        intruder = _Intruder(addr)
+        intruder.link.send_bytes(old)
+        reply = intruder._reply()
+        intruder.close()
+        _, err = proc.communicate(timeout=30)
+    finally:
+        _kill(proc)
+    assert reply is not None and reply.type == 7 and "version 2, not 1" in reply.text
+    assert "version 1" in err.splitlines()[0] and "Traceback" not in err
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+
+    def board_v3():
+        c, _ = srv.accept()
+        link = FramedTCP(c)
+        hello = link.recv(5.0)
+        data = bytearray(_welcome(hello, 3).encode())
+        data[2] = 3
+        data[-4:] = struct.pack("<I", zlib.crc32(bytes(data[:-4])))
+        link.send_bytes(bytes(data))
+        time.sleep(1.0)
+        c.close()
+
+    threading.Thread(target=board_v3, daemon=True).start()
+    player = _play_cli(table.path, f"tcp://127.0.0.1:{srv.getsockname()[1]}")
+    try:
+        _, err = player.communicate(timeout=60)
+    finally:
+        _kill(player)
+        srv.close()
+    assert player.returncode == 2
+    _one_line_error(err)
+    assert "version 3" in err
+
+
+def test_the_receiver_listens_on_loopback_unless_told_otherwise():
+    r = subprocess.run(
+        [sys.executable, "-m", "jaxcnc.hw.receiver", "tcp://0.0.0.0:0"], capture_output=True, text=True, timeout=60
+    )
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "not a loopback address" in r.stderr, r.stderr
+    proc, addr = spawn("tcp://0.0.0.0:0", "--allow-network", "--idle-timeout", "0.5")
+    out, err = proc.communicate(timeout=30)
+    assert addr.startswith("tcp://0.0.0.0:") and proc.returncode == 1 and "no frame from any player" in err
