@@ -8,6 +8,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 from jaxcnc.format import EventKind
 from jaxcnc.hw.player import Player
@@ -87,10 +88,28 @@ def _start_play(tmp_path, *extra: str, stdin=None):
     return proc, table, rec
 
 
+def _rows_recorded(rec) -> int:
+    """Rows the drives have executed so far (the recording's raw ``.part`` file grows as they run)."""
+    try:
+        return rec.with_name(rec.name + ".part").stat().st_size // 12
+    except FileNotFoundError:
+        return 0
+
+
+def _wait_rows(rec, n: int, timeout: float = 120.0) -> int:
+    """Wait (on the recording, not the clock: a loaded machine starts slowly) until ``n`` rows ran."""
+    deadline = time.monotonic() + timeout
+    while (got := _rows_recorded(rec)) < n:
+        assert time.monotonic() < deadline, f"only {got} rows executed"
+        time.sleep(0.02)
+    return got
+
+
+@pytest.mark.realtime
 def test_ctrl_c_in_jaxcnc_play_is_a_controlled_stop(tmp_path):
     m = make_machine()
     proc, table, rec = _start_play(tmp_path, "-q")
-    time.sleep(2.0)  # start-up, then about a second of motion
+    _wait_rows(rec, 10_000)  # about a second of motion
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
@@ -103,14 +122,15 @@ def test_ctrl_c_in_jaxcnc_play_is_a_controlled_stop(tmp_path):
     assert _windowed_accel(rows[:, 0].astype(float), m.discrete_mm, m.tick_hz).max() <= 1000.0 * 1.02
 
 
+@pytest.mark.realtime
 def test_jaxcnc_play_takes_hold_resume_and_override_from_a_pipe(tmp_path):
     """Operator controls on the command line: hold at full speed, resume at 50 %, to the end."""
     m = make_machine()
     proc, table, rec = _start_play(tmp_path, stdin=subprocess.PIPE)
-    time.sleep(2.5)  # start-up, then about a second and a half of motion
+    _wait_rows(rec, 15_000)  # about a second and a half of motion
     proc.stdin.write("hold\n")
     proc.stdin.flush()
-    time.sleep(1.5)
+    _wait_rows(rec, _rows_recorded(rec) + 25_000)  # the buffer (16,384 rows), the ramp, then a wait at rest
     proc.stdin.write("override 0.5\nbogus\nresume\n")
     proc.stdin.flush()
     out, err = proc.communicate(timeout=60)

@@ -15,7 +15,7 @@ from jaxcnc.hw.sinks.hal import HalStreamerSink, hal_available
 from tests.conftest import make_machine
 from tests.helpers import table_of
 
-pytestmark = pytest.mark.skipif(hal_available() is not None, reason=str(hal_available()))
+pytestmark = [pytest.mark.hal, pytest.mark.skipif(hal_available() is not None, reason=str(hal_available()))]
 
 # a square with the laser on, then a rapid back: ~2.3 s of motion at 10 kHz (23k ticks)
 PROGRAM = "G1 X10 F1200 M3 S500\nY10\nX0\nY0\nM5\nG0 X5 Y5\nM2\n"

@@ -79,6 +79,7 @@ def _run(table, scheme: str, faults: Faults, tmp_path, capacity: int = 4096) -> 
     return sink.stats, json.loads(out.strip().splitlines()[-1]), np.load(rec)
 
 
+@pytest.mark.realtime
 def test_tcp_with_a_disconnection_mid_job(table, tmp_path):
     sent, got, rec = _run(table, "tcp", Faults(disconnect_after=40), tmp_path)
     assert sent["reconnects"] == 1 and got["reconnects"] == 1
@@ -86,6 +87,7 @@ def test_tcp_with_a_disconnection_mid_job(table, tmp_path):
     np.testing.assert_array_equal(rec, table.positions)  # every tick executed once, in order
 
 
+@pytest.mark.realtime
 def test_udp_with_loss_duplication_and_reordering(table, tmp_path):
     sent, got, rec = _run(table, "udp", Faults(drop=0.05, duplicate=0.05, reorder=0.05, seed=3), tmp_path)
     assert sent["dropped"] > 0 and sent["duplicated"] > 0 and sent["reordered"] > 0
@@ -94,6 +96,7 @@ def test_udp_with_loss_duplication_and_reordering(table, tmp_path):
     np.testing.assert_array_equal(rec, table.positions)  # ... and every tick was still executed exactly once
 
 
+@pytest.mark.realtime
 def test_cli_plays_over_tcp(table, tmp_path):
     proc, addr = spawn("tcp://127.0.0.1:0", "--speed", "50")
     try:

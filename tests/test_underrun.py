@@ -84,6 +84,7 @@ class _LatePlayerSink(_StallsOnce, SimSink):
     """A real-time sim whose player stalls once, 1 s into the job, for 0.5 s."""
 
 
+@pytest.mark.realtime
 def test_sim_sink_reports_an_underrun_and_ramps_down(line):
     m, table, a_max = line
     sink = _LatePlayerSink(buffer_rows=4000, realtime=True, keep=True, a_max=a_max, trace=True)
@@ -101,6 +102,7 @@ class _LateStreamSink(_StallsOnce, StreamSink):
     stall_at, stall_s = 20_000, 1.0
 
 
+@pytest.mark.realtime
 def test_receiver_ramps_down_when_the_player_is_late_and_the_player_reports_it(line, tmp_path):
     m, table, a_max = line
     rec = tmp_path / "rec.npy"
