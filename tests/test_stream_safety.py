@@ -193,6 +193,59 @@ def test_a_foreign_client_cannot_inject_rows_or_end_the_job(job, tmp_path):
     np.testing.assert_array_equal(np.load(rec), table.positions)  # not one foreign row
 
 
+def test_a_stranger_that_says_hello_first_does_not_lock_the_player_out(job, tmp_path):
+    """Before the player connects, strangers open sessions and never use them: one closes its
+    connection at once (its session lapses with it), one keeps it open and silent (its session lapses
+    after the handshake time; the player is told to try again and does). The job plays, whole."""
+    m, table, a_max, _ = job
+    n_axes = table.header.n_axes
+    rec = tmp_path / "rec.npy"
+    proc, addr = spawn("tcp://127.0.0.1:0", "--record", str(rec), "--speed", "4", "--idle-timeout", "20")
+    try:
+        quitter = _Intruder(addr)
+        welcome = quitter.hello(n_axes)
+        assert welcome is not None and welcome.session  # the receiver took it for a player
+        quitter.close()
+        squatter = _Intruder(addr)
+        _wait_until(lambda: squatter.hello(n_axes) is not None, 10, "a WELCOME for the squatter")
+        t0 = time.monotonic()
+        result = play(table, StreamSink(addr))
+        waited = time.monotonic() - t0
+        squatter.close()
+        out, err = proc.communicate(timeout=60)
+    finally:
+        _kill(proc)
+    assert result.executed_tick == table.n_rows - 1
+    assert waited > 0.5  # it did wait for the squatter's session to lapse
+    assert "Traceback" not in err and "refused a second player (another session is opening)" in err, err
+    got = _summary(out)
+    assert got["executed"] == table.n_rows
+    np.testing.assert_array_equal(np.load(rec), table.positions)
+
+
+def test_a_busy_refusal_with_rows_executed_is_final():
+    """Unit: a session that has taken its first frame refuses others for good (no retry hint); one
+    still opening refuses with the time left to its lapse; one whose connection closed unused lapses."""
+    from jaxcnc.hw.receiver import Receiver
+    from jaxcnc.hw.stream import decode
+
+    r = Receiver(capacity=4096, a_max=np.full(2, 1e9))
+    hello = Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=5)
+    w = decode(r.handle(hello.encode(), "a", now=0.0).data)
+    refusal = decode(r.handle(Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=6).encode(), "b", now=0.5).data)
+    assert refusal.text.startswith("busy") and 1000 <= refusal.aux <= 1600
+    r.owner_gone("b")  # not the owner: nothing happens
+    assert decode(r.handle(Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=9).encode(), "c", now=0.55).data).aux
+    r.owner_gone("a")  # "a" closed its connection without a frame after WELCOME
+    w2 = decode(r.handle(Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=7).encode(), "b", now=0.6).data)
+    assert w2.session and w2.session != w.session
+    rows = np.zeros((4, 2), np.int32)
+    r.handle(Frame(DATA, 2, session=w2.session, seq=2, tick=0, count=4, rows=rows).encode(), "b", now=0.7)
+    r.owner_gone("b")  # used: it stays for the player to resume
+    final = decode(r.handle(Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=8).encode(), "c", now=0.8).data)
+    assert final.text.startswith("busy") and final.aux == 0
+
+
 def test_end_from_a_stranger_does_not_end_the_job(job, tmp_path):
     """One frame, ``END tick=0``, from a client of its own before the player connects: the job is
     still played, whole."""

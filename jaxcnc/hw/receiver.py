@@ -183,9 +183,11 @@ class Receiver:
         fields.update(kw)
         return Frame(typ, **fields).encode(self.key)
 
-    def refuse(self, text: str, signed: bool) -> Reply:
+    def refuse(self, text: str, signed: bool, retry_ms: int = 0) -> Reply:
+        """A REFUSED frame; ``retry_ms`` > 0 says the refusal is transient (a session still opening that
+        has moved nothing): the player may try again after that long."""
         self.stats["refused"] += 1
-        frame = Frame(REFUSED, session=0, seq=0, text=text)
+        frame = Frame(REFUSED, session=0, seq=0, aux=retry_ms, text=text)
         return Reply(frame.encode(self.key if signed else None), close=True)
 
     def handle(self, data: bytes, peer, now: float | None = None) -> Reply:
@@ -250,6 +252,11 @@ class Receiver:
             self.session, self.state = None, "idle"  # a WELCOME nobody answered: the session lapses
         if self.state == "pending" and peer == self.owner and f.nonce == self.nonce:
             return Reply(self.reply(WELCOME, nonce=f.nonce), owner=True)  # the same HELLO again (UDP)
+        if self.state == "pending":
+            # another client opened a session and has not used it yet: nothing moved, it lapses soon
+            left_ms = max(1, round((HANDSHAKE_S - (now - self.opened_at)) * 1000))
+            self._say("receiver: refused a second player (another session is opening)")
+            return self.refuse("busy: another player's session is opening; try again", True, retry_ms=left_ms)
         if self.state != "idle":
             self._say(f"receiver: refused a second player (busy with a job, {self.executed + 1} ticks executed)")
             return self.refuse(
@@ -273,6 +280,12 @@ class Receiver:
         self.clock = DriveClock(self.n_axes, self.tick_hz, self.a_max, reserve, self.capacity // 2)
         self.recorder = RowRecorder(self.n_axes, self.record_path)
         return Reply(self.reply(WELCOME, nonce=f.nonce), owner=True)
+
+    def owner_gone(self, peer) -> None:
+        """``peer``'s connection closed. If it owns a session it opened but never used, the session
+        lapses at once (nothing moved, nothing is lost); a used one stays, for the player to resume."""
+        if peer == self.owner and self.state == "pending" and self.n_rows is None and self.executed < 0 and not self.queued:
+            self.session, self.state, self.owner = None, "idle", None
 
     def _data(self, f: Frame) -> None:
         if self.ended or self.stopped or f.n_axes != self.n_axes:
@@ -441,6 +454,7 @@ def serve(
             link.close()
         if sock is owner_sock:
             owner_sock = None  # link lost: the buffer keeps running; the player may resume
+            receiver.owner_gone(sock)
 
     def send(sock_or_addr, data: bytes) -> bool:
         try:

@@ -62,7 +62,12 @@ class LinkError(ConnectionError):
 
 
 class Refused(LinkError):
-    """The receiver refused the session (busy, unknown session, another version, the shared key)."""
+    """The receiver refused the session (busy, unknown session, another version, the shared key).
+    ``retry_after_s`` > 0: a transient refusal (another session still opening, nothing moved)."""
+
+    def __init__(self, message: str, retry_after_s: float = 0.0) -> None:
+        super().__init__(message)
+        self.retry_after_s = retry_after_s
 
 
 @dataclass(frozen=True)
@@ -235,7 +240,7 @@ class StreamSink:
             return None
         if f.type == REFUSED:
             if self.session == 0 or f.session in (0, self.session):
-                raise Refused(f"the receiver refused: {f.text}")
+                raise Refused(f"the receiver refused: {f.text}", retry_after_s=f.aux / 1000.0)
             return None
         if self.session and f.session != self.session:
             return None
@@ -377,11 +382,19 @@ class StreamSink:
     def open(self, header: TableHeader) -> None:
         self.header = header
         deadline = time.monotonic() + self.link_timeout
-        self._connect(deadline)
-        try:
-            self._handshake(deadline, resume=False)
-        except _LinkDown as exc:
-            raise LinkError(f"link lost to the receiver during the handshake: {exc}") from None
+        while True:
+            self._connect(deadline)
+            try:
+                self._handshake(deadline, resume=False)
+                break
+            except _LinkDown as exc:
+                raise LinkError(f"link lost to the receiver during the handshake: {exc}") from None
+            except Refused as exc:
+                # another client's session is still opening (nothing moved): wait for it to lapse
+                wait = min(exc.retry_after_s, 1.0) + 0.01
+                if exc.retry_after_s <= 0 or time.monotonic() + wait >= deadline:
+                    raise
+                time.sleep(wait)
         self.last_progress = self.last_reply = time.monotonic()
 
     def free_rows(self) -> int:
