@@ -284,7 +284,8 @@ class Receiver:
     def owner_gone(self, peer) -> None:
         """``peer``'s connection closed. If it owns a session it opened but never used, the session
         lapses at once (nothing moved, nothing is lost); a used one stays, for the player to resume."""
-        if peer == self.owner and self.state == "pending" and self.n_rows is None and self.executed < 0 and not self.queued:
+        unused = self.state == "pending" and self.n_rows is None and self.executed < 0 and not self.queued
+        if peer == self.owner and unused:
             self.session, self.state, self.owner = None, "idle", None
 
     def _data(self, f: Frame) -> None:
