@@ -87,6 +87,9 @@ class MachineConfig:
     laser: LaserConfig = field(default_factory=LaserConfig)
     scanner: ScannerConfig | None = None
     source: str = "<memory>"
+    #: The planner's name (``[machine] planner``): a contour planner, or on a pulsed machine a pulse planner;
+    #: ``None``: the default. Checked against the registries when planning (see :func:`key_error`).
+    planner: str | None = None
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -155,6 +158,10 @@ def _fraction(v: float) -> str | None:
     return None if 0 <= v < 1 else "must be a fraction in [0, 1)"
 
 
+def _name(v: str) -> str | None:
+    return None if v.strip() == v and v else "must be a non-empty name without surrounding spaces"
+
+
 def _laser_mode(v: str) -> str | None:
     return None if v in ("cw", "pulsed", "pso") else f"unknown laser mode {v!r}; expected cw, pulsed or pso"
 
@@ -172,6 +179,7 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "name": ("string", False, "machine", None),
         "tick_hz": ("number", True, None, _positive),
         "discrete_mm": ("number", False, 0.001, _discrete),
+        "planner": ("string", False, None, _name),
     },
     "axis": {
         "v_max": ("number", True, None, _speed),
@@ -346,6 +354,7 @@ class _Loader:
             laser=LaserConfig(**laser),
             scanner=scanner,
             source=self.file,
+            planner=m["planner"],
         )
 
 
@@ -358,6 +367,19 @@ def parse_machine(text: str, file: str = "<string>") -> MachineConfig:
         m = re.search(r"line (\d+)", msg)
         raise MachineFileError(file, "", f"not valid TOML: {msg}", int(m.group(1)) if m else 0) from None
     return _Loader(file, text).load(doc)
+
+
+def key_error(machine: MachineConfig, table: str, key: str, reason: str) -> MachineFileError:
+    """An error about ``[table] key`` of ``machine``'s file, found by a later stage (e.g. an unknown planner).
+
+    Names the file and, when the file is still readable, the line that sets the key.
+    """
+    try:
+        text = Path(machine.source).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        text = ""
+    line = _Loader(machine.source, text).line_of(table, key) if text else 0
+    return MachineFileError(machine.source, f"{table}.{key}", reason, line)
 
 
 def load_machine(path: str | Path) -> MachineConfig:

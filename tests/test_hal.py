@@ -75,3 +75,35 @@ def test_feed_hold_and_resume_through_linuxcnc(tmp_path):
     assert player.holds == 1 and rec.shape[0] == result.executed_tick + 1 > table.n_rows + 5000
     np.testing.assert_array_equal(rec[-1], table.positions[-1])
     assert np.all(rec[:, 1:] == table.positions[0, 1:]) and np.all(np.diff(rec[:, 0]) >= 0)
+
+
+def test_two_sinks_opened_at_the_same_instant_one_is_refused(tmp_path):
+    """The guard is race-free: two players opening together can never both start a session."""
+    import threading
+
+    m = make_machine()
+    _, table, _ = table_of("G1 X1 F600\nM2\n", m, tmp_path)
+    sinks = [HalStreamerSink(keep=True) for _ in range(2)]
+    barrier = threading.Barrier(2)
+    outcome: list = [None, None]
+
+    def open_one(i: int) -> None:
+        barrier.wait()
+        try:
+            sinks[i].open(table.header)
+            outcome[i] = "opened"
+        except Exception as exc:  # noqa: BLE001 - the refusal is the point
+            outcome[i] = str(exc)
+
+    threads = [threading.Thread(target=open_one, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    try:
+        assert sorted(o == "opened" for o in outcome) == [False, True], outcome
+        assert any("already running" in o for o in outcome if o != "opened"), outcome
+    finally:
+        for s, o in zip(sinks, outcome, strict=True):
+            if o == "opened":
+                s.close()

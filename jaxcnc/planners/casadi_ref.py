@@ -31,15 +31,24 @@ from __future__ import annotations
 import numpy as np
 
 from jaxcnc.errors import PlanningError
+from jaxcnc.planners.protocol import Planner, PlanRequest
 from jaxcnc.planners.reference import DEFAULT_POINTS, import_optional, node_caps, plan_from_nodes, ref_problem
-from jaxcnc.planners.registry import Planner, PlanRequest, register_planner
+from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan
 
 
-def casadi_planner(n_points: int = DEFAULT_POINTS, tol: float = 1e-9) -> Planner:
-    """A planner solving the grid NLP with IPOPT on about ``n_points`` grid points."""
+class CasadiPlanner(Planner):
+    """The grid NLP solved by IPOPT on about ``n_points`` grid points (see the module docstring)."""
 
-    def plan(req: PlanRequest) -> Plan:
+    name = "casadi"
+    handles_jerk = True  # plan_job does not average its time law: the NLP has the jerk rows
+    honours_holds = False
+
+    def __init__(self, n_points: int = DEFAULT_POINTS, tol: float = 1e-9):
+        self.n_points, self.tol = n_points, tol
+
+    def plan(self, req: PlanRequest) -> Plan:
+        n_points, tol = self.n_points, self.tol
         ca = import_optional("casadi")
         p = ref_problem(req, n_points)
         cap = node_caps(p)
@@ -97,8 +106,10 @@ def casadi_planner(n_points: int = DEFAULT_POINTS, tol: float = 1e-9) -> Planner
             x[a : b + 1] = np.asarray(res["x"][: n + 1]).ravel() ** 2
         return plan_from_nodes(p, x, req)
 
-    plan.handles_jerk = True  # plan_job does not average its time law: the NLP has the jerk rows
-    return plan
+
+def casadi_planner(n_points: int = DEFAULT_POINTS, tol: float = 1e-9) -> CasadiPlanner:
+    """A :class:`CasadiPlanner` on about ``n_points`` grid points."""
+    return CasadiPlanner(n_points, tol)
 
 
 def _curvature_rate(s: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -108,4 +119,4 @@ def _curvature_rate(s: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.gradient(k, s, axis=0)
 
 
-register_planner("casadi")(casadi_planner())
+register_planner("casadi", CasadiPlanner())

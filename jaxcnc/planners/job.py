@@ -14,9 +14,9 @@ import numpy as np
 from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
 from jaxcnc.machine import AxisConfig, MachineConfig
-from jaxcnc.planners.registry import DEFAULT_PLANNER, PlanRequest, get_planner
-from jaxcnc.planners.smoothing import SmoothPlan, jerk_limited
-from jaxcnc.planners.timelaw import Plan
+from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, request_limits
+from jaxcnc.planners.registry import DEFAULT_PLANNER, resolve_planner
+from jaxcnc.planners.smoothing import jerk_limited
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 
 
@@ -30,10 +30,11 @@ class PlannedJob:
 
     program: Program
     spans: Spans
-    plan: Plan | SmoothPlan
+    plan: TimeLaw
     machine: MachineConfig
     axis_source: tuple[int, ...]
     plan_wall_s: float
+    planner: str = DEFAULT_PLANNER
 
     @property
     def path_length_mm(self) -> float:
@@ -93,9 +94,23 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
         )
 
 
-def plan_job(program: Program, machine: MachineConfig, planner: str = DEFAULT_PLANNER) -> PlannedJob:
-    """Plan ``program`` on ``machine`` with the named planner."""
+def machine_planner(machine: MachineConfig) -> str:
+    """The contour planner ``machine`` names (``[machine] planner``), or :data:`DEFAULT_PLANNER`."""
+    return machine.planner or DEFAULT_PLANNER
+
+
+def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | None = None) -> PlannedJob:
+    """Plan ``program`` on ``machine`` with ``planner``: a name, a :class:`Planner`, or ``None`` for the
+    machine file's ``planner`` (``topp`` when it names none)."""
     t0 = time.perf_counter()
+    try:
+        name, chosen = resolve_planner(machine_planner(machine) if planner is None else planner)
+    except PlanningError as exc:
+        if planner is None:  # the machine file named it
+            from jaxcnc.machine import key_error
+
+            raise key_error(machine, "machine", "planner", str(exc)) from None
+        raise
     axis_source = _check_axes(program, machine)
     spans = build_spans(program, machine.path.corner_tol_mm)
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
@@ -108,16 +123,12 @@ def plan_job(program: Program, machine: MachineConfig, planner: str = DEFAULT_PL
     dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     stop = program.stop_before[rows] & first_of_block
-    lim = machine.limits(PROGRAM_AXES)
-    v_max = np.where(np.isnan(lim["v_max"]), np.inf, lim["v_max"])
-    a_max = np.where(np.isnan(lim["a_max"]), np.inf, lim["a_max"])
-    j_max = np.where(np.isnan(lim["j_max"]), np.inf, lim["j_max"])
+    v_max, a_max, j_max = request_limits(machine)  # the machine's limits less the margin, applied here once
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)
-    fn = get_planner(planner)
-    if np.any(np.isfinite(j_max)) and not getattr(fn, "handles_jerk", False):
-        plan = jerk_limited(request, fn)  # jerk limits: the planner's time law averaged (an S-curve)
+    if np.any(np.isfinite(j_max)) and not chosen.handles_jerk:
+        plan = jerk_limited(request, chosen)  # jerk limits: the planner's time law averaged (an S-curve)
     else:
-        plan = fn(request)
+        plan = chosen.plan(request)
     return PlannedJob(
         program=program,
         spans=spans,
@@ -125,4 +136,5 @@ def plan_job(program: Program, machine: MachineConfig, planner: str = DEFAULT_PL
         machine=machine,
         axis_source=axis_source,
         plan_wall_s=time.perf_counter() - t0,
+        planner=name,
     )

@@ -26,6 +26,9 @@ Chord error. Drives interpolate linearly between ticks; a chord subtending ``Δ�
 ``1/κ`` has sagitta ``(1 - cos(Δθ/2)) / κ``, so ``chord_tol`` allows ``Δθ = 2 acos(1 - tol κ)`` per
 tick: ``v ≤ Δθ / κ · tick_hz``.
 
+The limits these functions are given are the request's (the machine's less
+:data:`~jaxcnc.planners.protocol.NUMERIC_MARGIN`, applied by :func:`~jaxcnc.planners.protocol.request_limits`).
+
 Junctions. A velocity step ``v |ΔT_i|`` within one tick must stay within
 ``JUNCTION_SHARE · a_max_i · dt``, which gives ``v ≤ JUNCTION_SHARE · a_max_i · dt / |ΔT_i|``.
 Junctions turning more than ``CORNER_ANGLE_RAD`` are corners: exact stop (v = 0).
@@ -39,9 +42,6 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry.kinds import SpanKind
 
 JUNCTION_SHARE = 0.05
-#: Relative margin below every limit, so that values measured on the table — whose positions
-#: carry a resolution of 2^-32 discrete — read below the limit rather than on it.
-NUMERIC_MARGIN = 1e-5
 ARC_NORMAL_SHARE = 2**-0.5
 CORNER_ANGLE_RAD = 0.0175  # 1°
 #: Tangent differences below this are rounding (e.g. between the C2 pieces of one spline): no kink.
@@ -154,7 +154,7 @@ def junctions(
             (exact stop programmed before the span).
     Returns:
         ``at_kink`` ``(n,)`` bool — the span starts or ends at a junction passed moving with a
-        velocity step (its smooth acceleration budget is reduced) — and ``j_cap`` ``(n-1,)``, the
+        velocity step (its smooth acceleration budget is reduced) — and ``x_junction`` ``(n-1,)``, the
         v² cap of each junction (0 where the motion stops: programmed stops, corners, points).
     """
     t_prev, t_next = tangent_out[:-1], tangent_in[1:]
@@ -162,5 +162,5 @@ def junctions(
     kink = ~stop & (jnp.max(jnp.abs(t_prev - t_next), axis=1) > KINK_TOL)  # passed moving, with a velocity step
     no = jnp.zeros((1,), bool)
     at_kink = jnp.concatenate([no, kink]) | jnp.concatenate([kink, no])
-    j_cap = jnp.where(stop, 0.0, junction_caps(t_prev, t_next, a_max, tick_hz))
-    return at_kink, j_cap
+    x_junction = jnp.where(stop, 0.0, junction_caps(t_prev, t_next, a_max, tick_hz))
+    return at_kink, x_junction

@@ -17,9 +17,10 @@ import numpy as np
 
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.planners.grid import Grid, build_grid
-from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions
-from jaxcnc.planners.registry import PlanRequest
-from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
+from jaxcnc.planners.limits import junctions
+from jaxcnc.planners.motion import trapezoids
+from jaxcnc.planners.protocol import PlanRequest
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs
 
 #: Grid points of a reference plan unless the request's machine says otherwise.
 DEFAULT_POINTS = 16_000
@@ -36,8 +37,8 @@ class RefProblem:
             the value of the interval that starts there).
         feed: ``(m+1,)`` programmed speed at the nodes (the lower of the two spans at a boundary).
         pieces: list of ``(first_node, last_node)`` planned from rest to rest.
-        v_max, a_max: ``(3,)`` axis limits (kept ``NUMERIC_MARGIN`` below the machine's).
-        j_max: ``(3,)`` axis jerk limits (``inf`` where unset or absent).
+        v_max, a_max: ``(3,)`` axis limits: the request's (the machine's less the margin).
+        j_max: ``(3,)`` axis jerk limits, the same way (``inf`` where unset or absent).
     """
 
     grid: Grid
@@ -63,16 +64,15 @@ def ref_problem(req: PlanRequest, n_points: int = DEFAULT_POINTS) -> RefProblem:
     s = np.concatenate([[0.0], np.cumsum(grid.delta)])
     f_int = req.feed_mm_s[grid.span]
     feed = np.minimum(np.concatenate([f_int, f_int[-1:]]), np.concatenate([f_int[:1], f_int]))
-    _, j_cap = jax.jit(junctions, static_argnames=("tick_hz",))(
+    _, x_junction = jax.jit(junctions, static_argnames=("tick_hz",))(
         spans.kind, spans.tangent_in, spans.tangent_out, req.stop_before, req.a_max, tick_hz=req.machine.tick_hz
     )
-    rest_span = np.concatenate([[True], np.asarray(j_cap) == 0.0, [True]])  # rest at span boundary b
+    rest_span = np.concatenate([[True], np.asarray(x_junction) == 0.0, [True]])  # rest at span boundary b
     first_node = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)  # node index of each span boundary
     rest_nodes = np.unique(first_node[rest_span])
     pieces = [(int(a), int(b)) for a, b in zip(rest_nodes[:-1], rest_nodes[1:], strict=True) if s[b] > s[a]]
-    keep = 1.0 - NUMERIC_MARGIN
-    j_max = (np.full(3, np.inf) if req.j_max is None else req.j_max) * keep
-    return RefProblem(grid, s, t, k, feed, pieces, req.v_max * keep, req.a_max * keep, j_max)
+    j_max = np.full(3, np.inf) if req.j_max is None else req.j_max
+    return RefProblem(grid, s, t, k, feed, pieces, req.v_max, req.a_max, j_max)
 
 
 def node_caps(p: RefProblem) -> np.ndarray:

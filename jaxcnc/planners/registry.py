@@ -1,72 +1,72 @@
 """Planners by name: the extension point for researchers' own velocity planners.
 
-A planner is a callable ``(PlanRequest) -> Plan`` registered under a name that the command line
-(``--planner``) and :func:`~jaxcnc.planners.plan_job` choose. See ``docs/planners.md``.
+A planner is a :class:`~jaxcnc.planners.protocol.Planner` registered under a name that the command line
+(``--planner``), the machine file (``[machine] planner``) and :func:`~jaxcnc.planners.plan_job` choose.
+The built-ins register when :mod:`jaxcnc.planners` is imported; third-party planners come from the
+``jaxcnc.planners`` entry-point group (:mod:`jaxcnc.plugins`). See ``docs/planners.md``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-
-import numpy as np
+from typing import Any
 
 from jaxcnc.errors import PlanningError
-from jaxcnc.geometry.spans import Spans
-from jaxcnc.machine import MachineConfig
-from jaxcnc.planners.timelaw import Plan
+from jaxcnc.planners.protocol import Planner, PlanRequest, as_planner
+from jaxcnc.plugins import Registry
 
+__all__ = [
+    "DEFAULT_PLANNER",
+    "PLANNERS",
+    "PlanRequest",
+    "Planner",
+    "get_planner",
+    "planner_names",
+    "register_planner",
+    "resolve_planner",
+]
 
-@dataclass(frozen=True, eq=False)
-class PlanRequest:
-    """What a planner is asked to plan.
-
-    Attributes:
-        spans: the path.
-        feed_mm_s: ``(n,)`` programmed speed of each span (feed, or the rapid cap for G0).
-        dwell_s: ``(n,)`` dwell time of each (point) span.
-        stop_before: ``(n,)`` bool, the motion must be at rest where the span starts.
-        v_max, a_max: ``(3,)`` limits of the x, y, z axes (``inf`` where the machine lacks one).
-        machine: the machine (tick rate, tolerances, ...).
-        j_max: optional ``(3,)`` jerk limits of the x, y, z axes (``inf`` where unset or absent).
-        hold_caps: optional ``(k, 3)`` rows ``(s_lo, s_hi, v)``: the speed stays ≤ ``v`` mm/s
-            between path lengths ``s_lo`` and ``s_hi`` mm from the program start (the jerk stage asks
-            for flat speed minima this way; planners that cannot honour it ignore it).
-    """
-
-    spans: Spans
-    feed_mm_s: np.ndarray
-    dwell_s: np.ndarray
-    stop_before: np.ndarray
-    v_max: np.ndarray
-    a_max: np.ndarray
-    machine: MachineConfig
-    j_max: np.ndarray | None = None
-    hold_caps: np.ndarray | None = None
-
-
-Planner = Callable[[PlanRequest], Plan]
 #: The planner used unless one is named: time-optimal with exact per-axis coupling.
 DEFAULT_PLANNER = "topp"
-_PLANNERS: dict[str, Planner] = {}
+#: Contour planners by name (entry-point group ``jaxcnc.planners``).
+PLANNERS: Registry[Planner] = Registry("planner", "jaxcnc.planners", adapt=as_planner, error=PlanningError)
 
 
-def register_planner(name: str) -> Callable[[Planner], Planner]:
-    """Decorator: make a planner available under ``name``."""
+def register_planner(
+    name: str, planner: Any = None, *, handles_jerk: bool | None = None, honours_holds: bool | None = None
+):
+    """Make a planner available under ``name``; without ``planner``, a decorator.
 
-    def deco(fn: Planner) -> Planner:
-        _PLANNERS[name] = fn
-        return fn
+    ``planner`` (or what the decorator decorates): a :class:`Planner` subclass (instantiated without
+    arguments), a :class:`Planner` instance, or a plain function ``(PlanRequest) -> Plan``, which is
+    wrapped with the capabilities given here (``handles_jerk``, ``honours_holds``; default ``False``).
+    The decorator returns what it decorates unchanged.
+    """
 
-    return deco
+    def add(obj: Any) -> Any:
+        p = as_planner(obj, name)
+        if handles_jerk is not None or honours_holds is not None:
+            if p is obj or isinstance(obj, type):
+                raise TypeError(f"planner {name!r}: declare the capabilities of a Planner class as class attributes")
+            p.handles_jerk = bool(handles_jerk)
+            p.honours_holds = bool(honours_holds)
+        PLANNERS.register(name, p)
+        return obj
+
+    return add if planner is None else add(planner)
 
 
 def get_planner(name: str) -> Planner:
-    try:
-        return _PLANNERS[name]
-    except KeyError:
-        raise PlanningError(f"unknown planner {name!r}; known: {', '.join(sorted(_PLANNERS))}") from None
+    """The planner registered (or installed through an entry point) under ``name``."""
+    return PLANNERS.get(name)
+
+
+def resolve_planner(planner: str | Planner) -> tuple[str, Planner]:
+    """``(name, planner)`` for a planner's name or a :class:`Planner` instance."""
+    if isinstance(planner, str):
+        return planner, get_planner(planner)
+    p = as_planner(planner)
+    return p.name or type(p).__name__, p
 
 
 def planner_names() -> list[str]:
-    return sorted(_PLANNERS)
+    return PLANNERS.names()

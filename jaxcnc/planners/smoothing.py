@@ -44,6 +44,8 @@ from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import pad_spans
+from jaxcnc.planners.motion import trapezoid_integral
+from jaxcnc.planners.protocol import DeviceLaw, Planner, PlanRequest, TimeLaw, machine_limits, with_margin
 from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
 
 CHUNK = 1 << 16
@@ -54,13 +56,13 @@ HOLD_WIDEN = 0.25
 
 
 @dataclass(frozen=True, eq=False)
-class SmoothPlan:
-    """A :class:`Plan` whose groups' ``s(t)`` is averaged over ``window_ticks`` ticks.
+class SmoothPlan(TimeLaw):
+    """A :class:`Plan` whose groups' ``s(t)`` is averaged over ``window_ticks`` ticks (a :class:`TimeLaw`).
 
     Group arrays ``(n_groups,)``: ``g_start`` (tick where the group starts in the base plan),
     ``g_ticks`` (its whole ticks there), ``g_new_start`` (where it starts here), ``g_s0`` (path
-    length at its start), ``g_len`` (its path length). ``alpha``: the acceleration scale the base
-    plan was made with.
+    length at its start), ``g_len`` (its path length). ``span_s0`` ``(n_spans,)``: path length from the
+    program start to each span's start. ``alpha``: the acceleration scale the base plan was made with.
     """
 
     base: Plan
@@ -74,6 +76,7 @@ class SmoothPlan:
     g_last_seg: np.ndarray
     seg_s_in_group: np.ndarray  # (n_segments,) path length from the group start to the segment start
     seg_prefix: np.ndarray  # (n_segments,) ∫ s dt from the group start to the segment start (mm·s)
+    span_s0: np.ndarray  # (n_spans,) path length from the program start to each span's start
     alpha: float = 1.0
 
     @property
@@ -111,6 +114,18 @@ class SmoothPlan:
         group = np.searchsorted(self.g_start, base.group_tick[first], side="right") - 1
         ticks = self.ticks_at_s(self.g_s0[group] + self.seg_s_in_group[first])
         return np.where(base.offset_ticks[first] == 0.0, self.g_new_start[group], ticks)
+
+    def ticks_at(self, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """The first tick at which segment ``seg`` has covered ``s`` mm (of the averaged motion)."""
+        return self.ticks_at_s(self.span_s0[self.span[seg]] + self.s_start[seg] + s)
+
+    def device_law(self) -> DeviceLaw:
+        """The group and segment arrays, the spans' starts (padded with ``inf``: never found) and :class:`SmoothLaw`."""
+        n = self.span_s0.shape[0]
+        span_s0 = np.full(bucket_size(n), np.inf)
+        span_s0[:n] = self.span_s0
+        arrays = dict(self._device, span_s0=jax.device_put(span_s0))
+        return DeviceLaw(SmoothLaw(self.window_ticks, self.tick_hz), arrays)
 
     @cached_property
     def _device(self) -> dict[str, jnp.ndarray]:
@@ -161,20 +176,8 @@ class SmoothPlan:
 
 def _segment_integral(plan: dict, seg: jnp.ndarray, tau: jnp.ndarray) -> jnp.ndarray:
     """``∫_0^τ s_local`` (mm·s) of segment ``seg`` ``τ`` seconds after its start (linear past its end)."""
-    v0, vp, aa, ad = plan["v0"][seg], plan["vp"][seg], plan["a_acc"][seg], plan["a_dec"][seg]
-    ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
-    l_acc = v0 * ta + 0.5 * aa * ta**2
-    l_cru = vp * tc
-    t1 = jnp.clip(tau, 0.0, ta)
-    t2 = jnp.clip(tau - ta, 0.0, tc)
-    t3 = jnp.clip(tau - ta - tc, 0.0, td)
-    t4 = jnp.maximum(tau - ta - tc - td, 0.0)
-    return (
-        v0 * t1**2 / 2 + aa * t1**3 / 6
-        + l_acc * t2 + vp * t2**2 / 2
-        + (l_acc + l_cru) * t3 + vp * t3**2 / 2 - ad * t3**3 / 6
-        + plan["length"][seg] * t4
-    )  # fmt: skip
+    keys = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "length")
+    return trapezoid_integral(*(plan[k][seg] for k in keys), tau, xp=jnp)
 
 
 _segment_integral_jit = jax.jit(lambda plan, seg, tau: _segment_integral(plan, seg, tau))
@@ -191,6 +194,21 @@ def _group_integral(plan: dict, g: jnp.ndarray, tau: jnp.ndarray, tick_hz: float
     a = plan["seg_prefix"][seg] + plan["seg_s_in_group"][seg] * t_seg + _segment_integral(plan, seg, t_seg)
     a = a + plan["g_len"][g] * jnp.maximum(tau - whole, 0).astype(jnp.float64) / tick_hz
     return jnp.where(tau <= 0, 0.0, a)
+
+
+@dataclass(frozen=True)
+class SmoothLaw:
+    """A :class:`SmoothPlan`'s :class:`~jaxcnc.planners.protocol.DeviceLaw` function (static: hashable by value)."""
+
+    window_ticks: int
+    tick_hz: float
+
+    def __call__(self, arrays: dict, tick: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+        """``(span, s in span)`` at integer ``tick``: ``s_W`` from the program start, then its span."""
+        s = s_of_ticks(arrays, tick, self.window_ticks, self.tick_hz)
+        span_s0 = arrays["span_s0"]
+        span = jnp.clip(jnp.searchsorted(span_s0, s, side="right") - 1, 0, span_s0.shape[0] - 1)
+        return span, s - span_s0[span]
 
 
 @partial(jax.jit, static_argnames=("window_ticks", "tick_hz"))
@@ -210,8 +228,9 @@ def _segment_integral_np(plan: Plan) -> np.ndarray:
     return np.asarray(_segment_integral_jit(arrays, np.arange(len(plan)), plan.duration_s))
 
 
-def smooth(plan: Plan, window_ticks: int, s_start_of_segment: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
-    """Average ``plan``'s groups over ``window_ticks`` ticks; ``s_start_of_segment``: global s at each segment start."""
+def smooth(plan: Plan, window_ticks: int, span_s0: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
+    """Average ``plan``'s groups over ``window_ticks`` ticks; ``span_s0``: path length at each span's start."""
+    s_start_of_segment = span_s0[plan.span] + plan.s_start
     first = np.concatenate([[True], plan.group_tick[1:] != plan.group_tick[:-1]])  # a group's first segment
     starts = np.flatnonzero(first)
     g_start = plan.group_tick[starts].astype(np.int64)
@@ -238,6 +257,7 @@ def smooth(plan: Plan, window_ticks: int, s_start_of_segment: np.ndarray, alpha:
         g_last_seg=np.concatenate([starts[1:] - 1, [len(plan) - 1]]).astype(np.int64),
         seg_s_in_group=seg_s_in_group,
         seg_prefix=seg_prefix,
+        span_s0=span_s0,
         alpha=alpha,
     )
 
@@ -310,8 +330,13 @@ def minima_holds(plan: Plan, s_seg: np.ndarray, window_s: float, widen: float) -
     return np.stack([s[lower] - r, s[lower] + r, v[lower]], axis=1)
 
 
-def jerk_limited(request, planner, iterations: int = 30) -> SmoothPlan:
-    """Plan ``request`` with ``planner`` so that its ``j_max`` ``(3,)`` (x, y, z) also holds at every tick.
+def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -> SmoothPlan:
+    """Plan ``request`` with ``planner`` so that the machine's ``j_max`` also holds at every tick.
+
+    ``planner`` must return a :class:`~jaxcnc.planners.timelaw.Plan` (its trapezoids are averaged). Each
+    attempt hands it the request with the acceleration scaled by ``alpha`` (the margin applied by
+    :func:`~jaxcnc.planners.protocol.with_margin`), lowered feeds and — if it declares ``honours_holds`` —
+    the held minima; the result is measured against the machine's own limits.
 
     The window starts at ``W = A/J`` (the largest over the axes). The speed minima of the plan are held
     flat (:func:`minima_holds`) and the program planned again. Where the averaged table still breaks a
@@ -323,19 +348,26 @@ def jerk_limited(request, planner, iterations: int = 30) -> SmoothPlan:
     """
     margin = 1.0 - 1e-6  # the table is sampled from these very positions; the verifier allows its rounding
     f = request.machine.tick_hz
-    spans, j_max = request.spans, request.j_max
+    spans = request.spans
+    v_max, a_max, j_max = machine_limits(request.machine)  # what the table is verified against
     span_s0 = spans.s0
     feed = np.asarray(request.feed_mm_s, dtype=np.float64).copy()
 
     def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, np.ndarray]:
-        a = request.a_max * alpha
-        base = planner(dataclasses.replace(request, a_max=a, feed_mm_s=feed, hold_caps=holds))
+        a = a_max * alpha
+        holds = holds if planner.honours_holds else None
+        base = planner.plan(dataclasses.replace(request, a_max=with_margin(a), feed_mm_s=feed, hold_caps=holds))
+        if not isinstance(base, Plan):
+            raise PlanningError(
+                f"planner {planner.name!r} returned a {type(base).__name__}; the S-curve stage (j_max is set) "
+                "averages a Plan's trapezoids: return a Plan, or declare handles_jerk = True"
+            )
         with np.errstate(invalid="ignore"):
             ratio = np.where(np.isfinite(j_max) & np.isfinite(a), a / (j_max * margin), 0.0)
         window = max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
-        sp = smooth(base, window, span_s0[base.span] + base.s_start, alpha)
+        sp = smooth(base, window, span_s0, alpha)
         # speeds are compared with the limit itself (no rounding to fear), a and j with the margin
-        worst, speed = span_peaks(sp, spans, request.v_max / margin, request.a_max, j_max)
+        worst, speed = span_peaks(sp, spans, v_max / margin, a_max, j_max)
         return sp, worst, speed
 
     alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf

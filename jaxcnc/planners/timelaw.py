@@ -1,10 +1,9 @@
-"""The time law ``s(t)``: trapezoidal speed profiles per span, aligned to the tick grid.
+"""The time law ``s(t)`` the built-in planners return: trapezoidal speed profiles per segment, on the tick grid.
 
-Given ``v²`` at the junction nodes (from :mod:`jaxcnc.planners.lookahead`), span ``k`` accelerates
-from ``v0`` at ``a``, may cruise at ``vp``, and decelerates to ``v1``. The peak comes from meeting
-the two parabolas: ``vp² = min(cap, (v0² + v1²)/2 + a L)``; the phase lengths are
-``L_acc = (vp² - v0²)/(2a)``, ``L_dec = (vp² - v1²)/(2a)``, ``L_cru = L - L_acc - L_dec`` and the
-times ``t = 2 L / (v_begin + v_end)`` per ramp, ``L_cru / vp`` for the cruise.
+Given ``v²`` at the junction nodes (from :mod:`jaxcnc.planners.lookahead`), each span is a trapezoid
+(:func:`~jaxcnc.planners.motion.trapezoids`: accelerate from ``v0``, cruise at ``vp``, decelerate to
+``v1``). :class:`Plan` implements the :class:`~jaxcnc.planners.protocol.TimeLaw` protocol the tick
+stage samples.
 
 Tick alignment. Between two junctions where the motion is at rest (a *group*: rest-to-rest
 motion, or a dwell) the motion takes ``T`` seconds; the group is given ``ceil(T f)`` ticks and the
@@ -24,10 +23,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.buckets import bucket_size
+from jaxcnc.planners.motion import trapezoid_position, trapezoid_speed, trapezoid_time_at, trapezoids
+from jaxcnc.planners.protocol import DeviceLaw, TimeLaw
+
+__all__ = ["PLAN_KEYS", "Plan", "align_to_ticks", "plan_from_outputs", "sample_plan", "trapezoids"]
 
 
 @dataclass(frozen=True, eq=False)
-class Plan:
+class Plan(TimeLaw):
     """The time law of a whole program as segments (NumPy arrays ``(n_segments,)``).
 
     A segment is a span or, where a planner cuts curved spans finer, a piece of one: it covers
@@ -75,6 +79,28 @@ class Plan:
         """``(n_spans,)`` the first tick at or after each span's start."""
         return self.first_tick[self.span_first_segment(n_spans)]
 
+    def ticks_at(self, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """The tick nearest to where segment ``seg`` has covered ``s`` mm (the trapezoid inverted exactly)."""
+        k = seg
+        tau = trapezoid_time_at(
+            self.v0[k], self.vp[k], self.a_acc[k], self.a_dec[k], self.t_acc[k], self.t_cru[k], self.t_dec[k], s
+        )
+        return np.rint(self.group_tick[k] + self.offset_ticks[k] + tau * self.tick_hz).astype(np.int64)
+
+    def device_law(self) -> DeviceLaw:
+        """The segments padded to a bucket (padding never found: first tick ``int64 max``) and :func:`plan_span_s`."""
+        n = len(self)
+        m = bucket_size(n)
+        big = np.iinfo(np.int64).max
+
+        def pad(a: np.ndarray, fill) -> np.ndarray:
+            return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
+
+        keys = PLAN_KEYS + ("length", "span", "s_start")
+        arrays = {k: jax.device_put(pad(getattr(self, k), big if k == "first_tick" else 0)) for k in keys}
+        arrays["tick_hz"] = jax.device_put(np.float64(self.tick_hz))
+        return DeviceLaw(plan_span_s, arrays)
+
 
 #: The per-segment outputs of :func:`trapezoids` + :func:`align_to_ticks` that a :class:`Plan` keeps.
 _PROFILE_KEYS = (
@@ -103,42 +129,6 @@ def plan_from_outputs(out: dict, length: np.ndarray, span: np.ndarray, s_start: 
     for v in arrays.values():
         v.setflags(write=False)
     return Plan(length=length, n_ticks=int(out["n_ticks"]), tick_hz=tick_hz, span=span, s_start=s_start, **arrays)
-
-
-def _safe_div(num: jnp.ndarray, den: jnp.ndarray) -> jnp.ndarray:
-    ok = den > 0
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
-
-
-def trapezoids(
-    x_node: jnp.ndarray, x_cap: jnp.ndarray, a: jnp.ndarray, length: jnp.ndarray, dwell_s: jnp.ndarray
-) -> dict[str, jnp.ndarray]:
-    """Per-span trapezoid from node ``v²`` ``(n+1,)`` and span caps/accel/length/dwell ``(n,)``."""
-    x0, x1 = x_node[:-1], x_node[1:]
-    a_fin = jnp.where(jnp.isfinite(a), a, 0.0)
-    xp = jnp.minimum(x_cap, 0.5 * (x0 + x1) + a_fin * length)
-    xp = jnp.maximum(xp, jnp.maximum(x0, x1))  # rounding of the passes
-    l_acc = _safe_div(xp - x0, 2.0 * a_fin)
-    l_dec = _safe_div(xp - x1, 2.0 * a_fin)
-    over = l_acc + l_dec
-    shrink = jnp.where(over > length, _safe_div(length, over), 1.0)
-    l_acc, l_dec = l_acc * shrink, l_dec * shrink
-    l_cru = jnp.maximum(length - l_acc - l_dec, 0.0)
-    v0, vp, v1 = jnp.sqrt(x0), jnp.sqrt(xp), jnp.sqrt(x1)
-    t_acc = _safe_div(2.0 * l_acc, v0 + vp)
-    t_dec = _safe_div(2.0 * l_dec, vp + v1)
-    t_cru = _safe_div(l_cru, vp) + dwell_s
-    # Ramp accelerations from the realised times: s(t) then ends exactly at L.
-    return dict(
-        v0=v0,
-        vp=vp,
-        v1=v1,
-        t_acc=t_acc,
-        t_cru=t_cru,
-        t_dec=t_dec,
-        a_acc=_safe_div(vp - v0, t_acc),
-        a_dec=_safe_div(vp - v1, t_dec),
-    )
 
 
 def _segmented_cumsum(values: jnp.ndarray, starts: jnp.ndarray) -> jnp.ndarray:
@@ -183,6 +173,8 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
 
 #: The per-segment fields of :class:`Plan` the tick kernels read (as a dict of JAX arrays).
 PLAN_KEYS = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
+#: A segment's trapezoid, in the argument order of :mod:`jaxcnc.planners.motion`.
+_TRAPEZOID = ("v0", "vp", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec")
 
 
 def local_time(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
@@ -199,24 +191,14 @@ def s_at(
     ``plan`` holds the per-segment arrays of :class:`Plan` (as JAX arrays, ``PLAN_KEYS``).
     """
     tau = local_time(plan, seg, tick, tick_hz)
-    v0, vp, aa, ad = plan["v0"][seg], plan["vp"][seg], plan["a_acc"][seg], plan["a_dec"][seg]
-    ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
-    l_acc = v0 * ta + 0.5 * aa * ta**2
-    t1 = jnp.minimum(tau, ta)
-    s_acc = v0 * t1 + 0.5 * aa * t1**2
-    t2 = jnp.clip(tau - ta, 0.0, tc)
-    t3 = jnp.clip(tau - ta - tc, 0.0, td)
-    s = jnp.where(tau < ta, s_acc, l_acc + vp * t2 + vp * t3 - 0.5 * ad * t3**2)
+    s = trapezoid_position(*(plan[k][seg] for k in _TRAPEZOID), tau, xp=jnp)
     return jnp.clip(s, 0.0, length[seg])
 
 
 def v_at(plan: dict[str, jnp.ndarray], seg: jnp.ndarray, tick: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
     """Path speed (mm/s) on segment ``seg`` at integer ``tick`` (arrays ``(m,)``)."""
     tau = local_time(plan, seg, tick, tick_hz)
-    ta, tc, td = plan["t_acc"][seg], plan["t_cru"][seg], plan["t_dec"][seg]
-    v_acc = plan["v0"][seg] + plan["a_acc"][seg] * jnp.minimum(tau, ta)
-    v_dec = plan["vp"][seg] - plan["a_dec"][seg] * jnp.clip(tau - ta - tc, 0.0, td)
-    return jnp.maximum(jnp.where(tau < ta, v_acc, v_dec), 0.0)  # (rounding may leave -1e-14 at a rest)
+    return trapezoid_speed(*(plan[k][seg] for k in _TRAPEZOID), tau, xp=jnp)
 
 
 def sample_plan(plan: Plan, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -242,3 +224,10 @@ def _sample(arrays: dict, length: jnp.ndarray, t: jnp.ndarray, tick_hz: float):
 def segment_of_tick(first_tick: jnp.ndarray, tick: jnp.ndarray) -> jnp.ndarray:
     """Index of the segment that holds each tick: the last one whose first tick is ≤ it."""
     return jnp.clip(jnp.searchsorted(first_tick, tick, side="right") - 1, 0, first_tick.shape[0] - 1)
+
+
+def plan_span_s(arrays: dict, tick: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """A :class:`Plan`'s :class:`~jaxcnc.planners.protocol.DeviceLaw` function: ``(span, s in span)`` at ``tick``."""
+    seg = segment_of_tick(arrays["first_tick"], tick)
+    s = arrays["s_start"][seg] + s_at(arrays, arrays["length"], seg, tick, arrays["tick_hz"])
+    return arrays["span"][seg], s

@@ -32,11 +32,12 @@ from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
-from jaxcnc.planners.limits import JUNCTION_SHARE, NUMERIC_MARGIN, chord_speed, junctions
+from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, junctions
+from jaxcnc.planners.lookahead_planner import plan_lookahead
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve_window
-from jaxcnc.planners.registry import PlanRequest, register_planner
+from jaxcnc.planners.protocol import Planner, PlanRequest
+from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
-from jaxcnc.planners.trapezoid import plan_lookahead
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -184,7 +185,6 @@ def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarra
     return bad
 
 
-@register_planner("topp")
 def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring).
 
@@ -246,22 +246,21 @@ class _ProgramFacts:
         spans = req.spans
         n = len(spans)
         nb = bucket_size(n)
-        keep = 1.0 - NUMERIC_MARGIN
-        at_kink, j_cap = _junction_facts(
+        at_kink, x_junction = _junction_facts(
             pad_rows(spans.kind, nb, SpanKind.POINT),
             pad_rows(spans.tangent_in, nb, 0.0),
             pad_rows(spans.tangent_out, nb, 0.0),
             pad_rows(req.stop_before, nb, True),
-            np.asarray(req.a_max) * keep,
+            np.asarray(req.a_max),
             req.machine.tick_hz,
         )
-        j_cap = np.asarray(j_cap)[: n - 1]
+        x_junction = np.asarray(x_junction)[: n - 1]
         zero = np.zeros(1)
         moves = np.any(spans.hi - spans.lo > 0, axis=0) & np.isfinite(req.a_max)
         return _ProgramFacts(
             at_kink=np.asarray(at_kink)[:n],
-            cap_start=np.concatenate([zero, j_cap]),  # rest before the first span and after the last
-            cap_end=np.concatenate([j_cap, zero]),
+            cap_start=np.concatenate([zero, x_junction]),  # rest before the first span and after the last
+            cap_end=np.concatenate([x_junction, zero]),
             is_point=spans.kind == SpanKind.POINT,
             axes=tuple(int(i) for i in np.flatnonzero(moves)),
         )
@@ -381,12 +380,11 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
     }
     hold_a, hold_b = node_holds(req, grid)
     g["hold_a"], g["hold_b"] = pad_rows(hold_a, mb, np.inf), pad_rows(hold_b, mb, np.inf)
-    keep = 1.0 - NUMERIC_MARGIN
     j_max = req.j_max
     out = plan_grid(
         g,
-        np.asarray(req.v_max) * keep,
-        np.asarray(req.a_max) * keep,
+        np.asarray(req.v_max),
+        np.asarray(req.a_max),
         machine.path.chord_tol_mm,
         machine.tick_hz,
         x_start,
@@ -395,3 +393,15 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
         j_max=np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}
+
+
+@register_planner("topp")
+class ToppPlanner(Planner):
+    """``topp`` (the default): time-optimal, per-axis limits coupled exactly; honours the S-curve stage's holds."""
+
+    name = "topp"
+    handles_jerk = False  # under j_max, plan_job runs it inside the S-curve stage
+    honours_holds = True
+
+    def plan(self, request: PlanRequest) -> Plan:
+        return plan_topp(request)

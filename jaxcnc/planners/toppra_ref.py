@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from jaxcnc.errors import PlanningError
+from jaxcnc.planners.protocol import Planner, PlanRequest
 from jaxcnc.planners.reference import DEFAULT_POINTS, RefProblem, import_optional, plan_from_nodes, ref_problem
-from jaxcnc.planners.registry import Planner, PlanRequest, register_planner
+from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan
 
 #: Stand-in for "no limit" (toppra needs finite bounds).
@@ -62,10 +63,18 @@ def _path(p: RefProblem, a: int, b: int):
     return NodePath(), s
 
 
-def toppra_planner(n_points: int = DEFAULT_POINTS, scheme: str = "interpolation") -> Planner:
-    """A planner calling toppra on about ``n_points`` grid points with the given discretisation."""
+class ToppraPlanner(Planner):
+    """toppra on about ``n_points`` grid points with the given discretisation (see the module docstring)."""
 
-    def plan(req: PlanRequest) -> Plan:
+    name = "toppra"
+    handles_jerk = False
+    honours_holds = False
+
+    def __init__(self, n_points: int = DEFAULT_POINTS, scheme: str = "interpolation"):
+        self.n_points, self.scheme = n_points, scheme
+
+    def plan(self, req: PlanRequest) -> Plan:
+        n_points, scheme = self.n_points, self.scheme
         toppra = import_optional("toppra")
         constraint = toppra.constraint
         kind = {
@@ -97,7 +106,10 @@ def toppra_planner(n_points: int = DEFAULT_POINTS, scheme: str = "interpolation"
             x[a : b + 1] = np.asarray(data.sd_vec) ** 2
         return plan_from_nodes(p, x, req)
 
-    return plan
+
+def toppra_planner(n_points: int = DEFAULT_POINTS, scheme: str = "interpolation") -> ToppraPlanner:
+    """A :class:`ToppraPlanner` on about ``n_points`` grid points with the given discretisation."""
+    return ToppraPlanner(n_points, scheme)
 
 
-register_planner("toppra")(toppra_planner())
+register_planner("toppra", ToppraPlanner())

@@ -1,9 +1,12 @@
-"""Sampling the time law at the tick rate: tick → s → u → position, batched on the device.
+"""Sampling the time law at the tick rate: tick → (span, s) → position, batched on the device.
 
-For tick ``k`` the segment comes from a search over segment first ticks, the path parameter from
-the segment's trapezoid, the position from the span's closed form (:mod:`jaxcnc.geometry.evaluate`).
-Ticks are processed in fixed-size chunks (one compiled program for any job); positions are
-quantised from the exact position each tick — rounding never accumulates.
+Any planner's time law (:class:`~jaxcnc.planners.protocol.TimeLaw`) hands this stage its
+:class:`~jaxcnc.planners.protocol.DeviceLaw`: device arrays and a pure function giving, for each tick,
+the span and the path parameter within it (for a :class:`~jaxcnc.planners.timelaw.Plan`: a search over
+segment first ticks, then the segment's trapezoid). The position comes from the span's closed form
+(:mod:`jaxcnc.geometry.evaluate`), in the same compiled program. Ticks are processed in fixed-size chunks
+(one compiled program per kind of time law and bucket size); positions are quantised from the exact
+position each tick — rounding never accumulates.
 """
 
 from __future__ import annotations
@@ -22,23 +25,20 @@ from jaxcnc.format import FINE_SCALE
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.planners.job import PlannedJob
-from jaxcnc.planners.smoothing import SmoothPlan, positions_at_s, span_starts
-from jaxcnc.planners.timelaw import PLAN_KEYS, s_at, segment_of_tick
 
 CHUNK_TICKS = 1 << 16
 
 
-@partial(jax.jit, static_argnames=("chunk",))
+@partial(jax.jit, static_argnames=("chunk", "law_fn"))
 def _positions_chunk(
-    first: jnp.ndarray, n_last: jnp.ndarray, plan: dict, spans: dict, tick_hz: jnp.ndarray, chunk: int
+    first: jnp.ndarray, n_last: jnp.ndarray, law_fn, law: dict, spans: dict, chunk: int
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Exact program-axis positions ``(chunk, 3)`` and their segment, for ticks ``first + i``:
-    tick → segment → s → position."""
+    """Exact program-axis positions ``(chunk, 3)`` and their span, for ticks ``first + i``:
+    tick → (span, s) by the time law's ``law_fn`` → position."""
     tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)
-    seg = segment_of_tick(plan["first_tick"], tick)
-    s = plan["s_start"][seg] + s_at(plan, plan["length"], seg, tick, tick_hz)
-    (p,) = evaluate_path(spans, plan["span"][seg], s, xp=jnp)
-    return p, seg
+    span, s = law_fn(law, tick)
+    (p,) = evaluate_path(spans, span, s, xp=jnp)
+    return p, span
 
 
 @jax.jit
@@ -68,27 +68,15 @@ def machine_axes(program_p: np.ndarray, axis_source: np.ndarray, home: np.ndarra
 
 
 class TickSampler:
-    """Samples a planned job at its tick rate, chunk by chunk, in machine-axis order."""
+    """Samples a planned job at its tick rate, chunk by chunk, in machine-axis order (any time law)."""
 
     def __init__(self, job: PlannedJob, chunk: int = CHUNK_TICKS):
         self.job, self.chunk = job, chunk
-        plan, spans = job.plan, job.spans
         m_axes = job.machine.axis_names
         self._src = np.asarray(job.axis_source)
         self._home = np.array([job.machine.axis(a).home for a in m_axes])
-        if isinstance(plan, SmoothPlan):  # jerk-limited: tick → s_W → span → u → position
-            self._spans, self._span_s0 = span_starts(spans)
-            return
-        n = len(plan)
-        m = bucket_size(n)
-        big = np.iinfo(np.int64).max
-
-        def pad(a: np.ndarray, fill) -> np.ndarray:
-            return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
-
-        keys = PLAN_KEYS + ("length", "span", "s_start")
-        self._plan = {k: jax.device_put(pad(getattr(plan, k), big if k == "first_tick" else 0)) for k in keys}
-        self._spans = span_arrays(pad_spans(spans, bucket_size(len(spans))), xp=jnp)
+        self._law_fn, self._law = job.plan.device_law()
+        self._spans = span_arrays(pad_spans(job.spans, bucket_size(len(job.spans))), xp=jnp)
 
     @property
     def n_rows(self) -> int:
@@ -96,20 +84,10 @@ class TickSampler:
 
     def program_positions(self, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
         """Exact x, y, z positions ``(count, 3)`` mm and span index of ticks ``first..``."""
-        plan = self.job.plan
-        if isinstance(plan, SmoothPlan):
-            ticks = np.minimum(np.arange(first, first + self.chunk), plan.n_ticks)
-            p, span = positions_at_s(self._spans, self._span_s0, plan.s_at(ticks))
-            return np.asarray(p)[:count], np.asarray(span)[:count]
-        p, seg = _positions_chunk(
-            np.int64(first),
-            np.int64(self.job.plan.n_ticks),
-            self._plan,
-            self._spans,
-            np.float64(self.job.machine.tick_hz),
-            self.chunk,
+        p, span = _positions_chunk(
+            np.int64(first), np.int64(self.job.plan.n_ticks), self._law_fn, self._law, self._spans, self.chunk
         )
-        return np.asarray(p)[:count], np.asarray(seg)[:count]
+        return np.asarray(p)[:count], np.asarray(span)[:count]
 
     def machine_positions(self, program_p: np.ndarray) -> np.ndarray:
         """Map program x, y, z columns to the machine's axes (undriven axes stay at home)."""

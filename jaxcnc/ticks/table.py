@@ -17,7 +17,6 @@ from jaxcnc.format import EVENT_DTYPE, EventKind, TableWriter, file_sha256
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
-from jaxcnc.planners.registry import DEFAULT_PLANNER
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.pso import pso_events
 from jaxcnc.ticks.sample import Sampler, TickSampler, quantize
@@ -125,12 +124,12 @@ def table_meta(machine: MachineConfig, source: str, planner: str, total_time_s: 
     }
 
 
-def write_table(
-    job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str = DEFAULT_PLANNER
-) -> Path:
+def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str | None = None) -> Path:
     """Sample ``job`` at its tick rate and write the table file at ``path``.
 
-    ``progress``: show a progress bar (``None``: only on a terminal).
+    ``progress``: show a progress bar (``None``: only on a terminal). ``planner``: the name the header
+    records (default: the planner that planned ``job``).
     """
+    planner = planner or job.planner
     meta = table_meta(job.machine, job.program.file, planner, job.plan.total_time_s, n_blocks=job.program.n_blocks)
     return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress)

@@ -21,7 +21,7 @@ from jaxcnc.errors import SourceError
 from jaxcnc.io.points import PointJob
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import outside_travel, program_start
-from jaxcnc.planners.limits import NUMERIC_MARGIN
+from jaxcnc.planners.protocol import request_limits, with_margin
 from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (register the planners)
 from jaxcnc.planners.pulsed.request import (
     PulsePlan,
@@ -70,7 +70,6 @@ def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
     """Check ``job`` against ``machine`` (axes, travel) and build the planners' request."""
     pts = job.points
     names = machine.axis_names
-    lim = machine.limits(PROGRAM_AXES)
     home = program_start(machine)
     for col, axis in enumerate(PROGRAM_AXES):
         if axis in names:
@@ -90,21 +89,16 @@ def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
             0,
             f"{axis.upper()} {value:g} mm is outside the travel of machine {machine.name!r} [{ax.min:g}, {ax.max:g}]",
         )
-    keep = 1.0 - NUMERIC_MARGIN
-
-    def lim_of(key: str) -> np.ndarray:
-        v = lim[key]
-        return np.where(np.isnan(v), np.inf, v) * keep
-
+    v_max, a_max, j_max = request_limits(machine)  # the machine's limits less the margin, applied here once
     return PulseRequest(
         points=pts,
         home=home,
         window=pulse_window(machine),
-        v_max=lim_of("v_max"),
-        a_max=lim_of("a_max"),
-        j_max=lim_of("j_max"),
-        feed_mm_s=machine.path.feed * keep,
-        rapid_mm_s=machine.path.rapid * keep,
+        v_max=v_max,
+        a_max=a_max,
+        j_max=j_max,
+        feed_mm_s=with_margin(machine.path.feed),
+        rapid_mm_s=with_margin(machine.path.rapid),
         line=job.line,
         file=job.file,
     )

@@ -1,7 +1,9 @@
 """What a pulse planner is asked (:class:`PulseRequest`), what it answers (:class:`PulsePlan`), by name.
 
 A pulse planner is a callable ``(PulseRequest) -> PulsePlan`` registered with
-:func:`register_pulse_planner`; ``jaxcnc plan --planner NAME`` chooses it for point jobs.
+:func:`register_pulse_planner` (or installed through the ``jaxcnc.pulse_planners`` entry-point group,
+:mod:`jaxcnc.plugins`); ``jaxcnc plan --planner NAME`` or ``[machine] planner`` on a pulsed machine
+chooses it for point jobs.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 from jaxcnc.errors import PlanningError
 from jaxcnc.planners.pulsed.trajectory import Trajectory
 from jaxcnc.planners.pulsed.windows import PulseWindow
+from jaxcnc.plugins import Registry
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,9 +28,9 @@ class PulseRequest:
         home: ``(3,)`` where the machine stands at the start (at rest).
         window: the lamp's admissible pulse intervals.
         v_max, a_max, j_max: ``(3,)`` per-axis limits of x, y, z (``inf`` where absent or unset),
-            already reduced by the planners' numeric margin.
-        feed_mm_s: cap on the path speed between points.
-        rapid_mm_s: cap on the path speed of the approach from ``home``.
+            already reduced by the margin (:func:`~jaxcnc.planners.protocol.with_margin`): plan at them.
+        feed_mm_s: cap on the path speed between points (the machine's feed, reduced the same way).
+        rapid_mm_s: cap on the path speed of the approach from ``home`` (the same).
         line: ``(n,)`` source line of each point, for error messages.
         file: the source.
     """
@@ -94,26 +97,28 @@ class PulsePlan:
 
 
 PulsePlanner = Callable[[PulseRequest], PulsePlan]
-_PULSE_PLANNERS: dict[str, PulsePlanner] = {}
+
+
+def _callable(obj):
+    if not callable(obj):
+        raise TypeError(f"{obj!r} is not a pulse planner (a callable (PulseRequest) -> PulsePlan)")
+    return obj
+
+
+#: Pulse planners by name (entry-point group ``jaxcnc.pulse_planners``).
+PULSE_PLANNERS: Registry[PulsePlanner] = Registry(
+    "pulse planner", "jaxcnc.pulse_planners", adapt=_callable, error=PlanningError
+)
 
 
 def register_pulse_planner(name: str) -> Callable[[PulsePlanner], PulsePlanner]:
     """Decorator: make a pulse planner available under ``name``."""
-
-    def deco(fn: PulsePlanner) -> PulsePlanner:
-        _PULSE_PLANNERS[name] = fn
-        return fn
-
-    return deco
+    return PULSE_PLANNERS.register(name)
 
 
 def get_pulse_planner(name: str) -> PulsePlanner:
-    try:
-        return _PULSE_PLANNERS[name]
-    except KeyError:
-        known = ", ".join(sorted(_PULSE_PLANNERS))
-        raise PlanningError(f"unknown pulse planner {name!r}; known: {known}") from None
+    return PULSE_PLANNERS.get(name)
 
 
 def pulse_planner_names() -> list[str]:
-    return sorted(_PULSE_PLANNERS)
+    return PULSE_PLANNERS.names()

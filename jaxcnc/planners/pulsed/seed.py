@@ -21,6 +21,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.errors import SourceError
 from jaxcnc.planners.lookahead import lookahead
+from jaxcnc.planners.motion import ramp_times
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.trajectory import Trajectory, move_pieces
 from jaxcnc.planners.pulsed.windows import snap_up_ticks
@@ -38,10 +39,7 @@ def _block_time(lam, v0, v1_max, v_cap, length, a):
     lo = jnp.sqrt(jnp.maximum(mid - a * length, 0.0))  # slowest peak that still covers L
     hi = jnp.maximum(jnp.minimum(v_cap, jnp.sqrt(mid + a * length)), lo)
     vp = jnp.clip(lam * v_cap, lo, hi)
-    t1 = jnp.abs(vp - v0) / a
-    t3 = jnp.abs(vp - v1) / a
-    cruise = jnp.maximum(length - 0.5 * (v0 + vp) * t1 - 0.5 * (vp + v1) * t3, 0.0)
-    t2 = jnp.where(vp > 0, cruise / jnp.where(vp > 0, vp, 1.0), jnp.where(cruise > 0, jnp.inf, 0.0))
+    t1, t2, t3, _, _ = ramp_times(v0, vp, v1, length, a, xp=jnp)
     return t1 + t2 + t3, vp, v1
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from jaxcnc.planners.motion import rest_to_rest as rest_to_rest_move
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.trajectory import Trajectory, move_pieces, rest_pieces
 
@@ -20,13 +21,10 @@ from jaxcnc.planners.pulsed.trajectory import Trajectory, move_pieces, rest_piec
 def rest_to_rest(req: PulseRequest, start: np.ndarray, end: np.ndarray, cap_mm_s) -> tuple[np.ndarray, ...]:
     """Straight rest-to-rest moves ``start → end`` ``(k, 3)``: ``(u, length, vp, a, t_s)``.
 
-    Peak speed ``vp = min(v_cap, sqrt(a L))`` (the triangle's apex when the ramps meet);
-    time ``2 vp/a + (L - vp²/a)/vp``.
+    Peak speed and time from :func:`jaxcnc.planners.motion.rest_to_rest`.
     """
     u, length, v_path, a_path = req.straight(end - start, cap_mm_s)
-    vp = np.minimum(v_path, np.sqrt(a_path * length))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(length > 0, 2.0 * vp / a_path + (length - vp * vp / a_path) / np.where(vp > 0, vp, 1.0), 0.0)
+    vp, t = rest_to_rest_move(v_path, length, a_path)
     return u, length, vp, a_path, t
 
 

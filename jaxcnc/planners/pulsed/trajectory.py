@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jaxcnc.planners.motion import ramp_times
+
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:
@@ -87,16 +89,10 @@ def ramp_profile(
     """Times of a ramp ``v0 → vp``, a cruise at ``vp``, a ramp ``vp → v1`` (each ramp at ``±a``).
 
     Returns ``(t1, t2, t3, s1, s2)``: the phase durations (s) and the path length at the end of
-    the first ramp and of the cruise. ``vp`` must allow both ramps within ``length``.
+    the first ramp and of the cruise (:func:`jaxcnc.planners.motion.ramp_times`). ``vp`` must allow
+    both ramps within ``length``.
     """
-    t1 = np.abs(vp - v0) / a
-    t3 = np.abs(vp - v1) / a
-    s1 = 0.5 * (v0 + vp) * t1
-    s3 = 0.5 * (vp + v1) * t3
-    cruise = np.maximum(length - s1 - s3, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t2 = np.where(vp > 0, cruise / np.where(vp > 0, vp, 1.0), 0.0)
-    return t1, t2, t3, s1, s1 + cruise
+    return ramp_times(v0, vp, v1, length, a)
 
 
 def move_pieces(

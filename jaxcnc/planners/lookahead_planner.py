@@ -1,9 +1,10 @@
-"""The default planner ``lookahead``: whole-program acceleration-limited trapezoids.
+"""The planner ``lookahead``: whole-program acceleration-limited trapezoids with span-constant caps.
 
 Caps (:mod:`~jaxcnc.planners.limits`) → two parallel look-ahead scans
-(:mod:`~jaxcnc.planners.lookahead`) → trapezoid per span and tick alignment
-(:mod:`~jaxcnc.planners.timelaw`), all in one jitted array program. Inputs are padded to a
-power-of-two bucket so a new job of similar size reuses the compiled program.
+(:mod:`~jaxcnc.planners.lookahead`) → trapezoid per span (:mod:`~jaxcnc.planners.motion`) and tick
+alignment (:mod:`~jaxcnc.planners.timelaw`), all in one jitted array program. Inputs are padded to a
+bucket size so a new job of similar size reuses the compiled program. The fastest planner to compute;
+``topp`` (the default) plans a program of lines alone through it, where both give the same plan.
 """
 
 from __future__ import annotations
@@ -15,10 +16,12 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.planners.limits import NUMERIC_MARGIN, junctions, span_caps
+from jaxcnc.planners.limits import junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
-from jaxcnc.planners.registry import PlanRequest, register_planner
-from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
+from jaxcnc.planners.motion import trapezoids
+from jaxcnc.planners.protocol import Planner, PlanRequest
+from jaxcnc.planners.registry import register_planner
+from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs
 
 #: An axis whose extent within a span is below this (mm) does not move there.
 MOVING_MM = 1e-12
@@ -47,13 +50,13 @@ def plan_arrays(
     Returns the dict of :func:`~jaxcnc.planners.timelaw.align_to_ticks` plus ``x_node`` (v² at
     the ``n+1`` nodes).
     """
-    at_kink, j_cap = junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
+    at_kink, x_junction = junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
     x_cap, a_t = span_caps(
         kind, length, kappa, d1, d2, tangent_in, moving, feed, v_max, a_max, chord_tol, tick_hz, at_kink
     )
-    j_cap = jnp.minimum(j_cap, jnp.minimum(x_cap[:-1], x_cap[1:]))
+    x_junction = jnp.minimum(x_junction, jnp.minimum(x_cap[:-1], x_cap[1:]))
     zero = jnp.zeros((1,), jnp.float64)
-    node_cap = jnp.concatenate([zero, j_cap, zero])
+    node_cap = jnp.concatenate([zero, x_junction, zero])
     delta = jnp.where(kind == SpanKind.POINT, 0.0, 2.0 * a_t * length)
     x_node = lookahead(node_cap, delta)
     prof = trapezoids(x_node, x_cap, a_t, length, dwell)
@@ -62,9 +65,8 @@ def plan_arrays(
     return out
 
 
-@register_planner("lookahead")
 def plan_lookahead(req: PlanRequest) -> Plan:
-    """Plan with the whole-program trapezoidal look-ahead (see the module docstring)."""
+    """Plan with the whole-program trapezoidal look-ahead (see the module docstring), at the request's limits."""
     spans, machine = req.spans, req.machine
     n = len(spans)
     m = bucket_size(n)
@@ -81,12 +83,23 @@ def plan_lookahead(req: PlanRequest) -> Plan:
         pad_rows(req.dwell_s, m, 0.0),
         pad_rows(req.stop_before, m, True),
     )
-    keep = 1.0 - NUMERIC_MARGIN
     out = plan_arrays(
         *args,
-        np.asarray(req.v_max) * keep,
-        np.asarray(req.a_max) * keep,
+        np.asarray(req.v_max),
+        np.asarray(req.a_max),
         machine.path.chord_tol_mm,
         machine.tick_hz,
     )
     return plan_from_outputs(jax.device_get(out), spans.length, np.arange(n), np.zeros(n), machine.tick_hz)
+
+
+@register_planner("lookahead")
+class LookaheadPlanner(Planner):
+    """``lookahead``: span-constant caps, two associative scans, one trapezoid per span."""
+
+    name = "lookahead"
+    handles_jerk = False  # under j_max, plan_job runs it inside the S-curve stage
+    honours_holds = False
+
+    def plan(self, request: PlanRequest) -> Plan:
+        return plan_lookahead(request)

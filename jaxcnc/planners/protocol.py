@@ -1,0 +1,213 @@
+"""The planner protocols: what a planner is asked (:class:`PlanRequest`), what it is (:class:`Planner`), what it
+answers (:class:`TimeLaw`), and the one safety margin below the machine's limits.
+
+A third-party planner subclasses :class:`Planner`, declares its capabilities as class attributes and
+implements :meth:`Planner.plan`; it returns a :class:`TimeLaw` — in practice a
+:class:`~jaxcnc.planners.timelaw.Plan` (per-segment trapezoids on the tick grid), which every built-in
+planner returns and which the S-curve stage needs. The tick stage samples any :class:`TimeLaw` through
+:meth:`TimeLaw.device_law` without knowing which planner made it.
+
+>>> class Gentle(Planner):                                      # doctest: +SKIP
+...     name = "gentle"
+...     def plan(self, request):
+...         slower = dataclasses.replace(request, v_max=request.v_max / 2, a_max=request.a_max / 2)
+...         return get_planner("topp").plan(slower)
+
+The margin. The table is verified at the tick rate from positions that carry a resolution of 2^-32
+discrete, so a plan exactly at a limit reads at the limit plus rounding. Every limit a planner is given
+(:attr:`PlanRequest.v_max`, ``a_max``, ``j_max``, and the same in a pulse request) is therefore the
+machine's limit times ``1 - NUMERIC_MARGIN`` already (:func:`with_margin`, applied once, by
+:func:`request_limits`): a planner plans *at* the request's limits and its table passes ``jaxcnc check``.
+Programmed speeds (feed, rapid cap) are not machine limits and are passed as programmed. A planner's
+own discretisation allowance (``topp``'s ``GRID_MARGIN`` for what the path's derivatives do between
+grid nodes) is its business and stays inside it.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from jaxcnc.geometry.spans import Spans
+    from jaxcnc.machine import MachineConfig
+
+#: Relative margin below every machine limit, so that values measured on the table — whose positions
+#: carry a resolution of 2^-32 discrete — read below the limit rather than on it.
+NUMERIC_MARGIN = 1e-5
+
+
+def with_margin(limit):
+    """``limit`` (a number or an array) reduced by :data:`NUMERIC_MARGIN`: what a planner may reach."""
+    return limit * (1.0 - NUMERIC_MARGIN)
+
+
+def machine_limits(machine: MachineConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(v_max, a_max, j_max)``, each ``(3,)`` for x, y, z, as the machine file gives them.
+
+    ``inf`` where the machine lacks the axis or sets no ``j_max``. These are the limits the table is
+    verified against; planners get :func:`request_limits`.
+    """
+    from jaxcnc.program import PROGRAM_AXES
+
+    lim = machine.limits(PROGRAM_AXES)
+    return tuple(np.where(np.isnan(lim[k]), np.inf, lim[k]) for k in ("v_max", "a_max", "j_max"))
+
+
+def request_limits(machine: MachineConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(v_max, a_max, j_max)`` ``(3,)`` a planner must honour: :func:`machine_limits` with the margin."""
+    return tuple(with_margin(v) for v in machine_limits(machine))
+
+
+@dataclass(frozen=True, eq=False)
+class PlanRequest:
+    """What a planner is asked to plan.
+
+    Attributes:
+        spans: the path.
+        feed_mm_s: ``(n,)`` programmed speed of each span (feed, or the rapid cap for G0), as programmed.
+        dwell_s: ``(n,)`` dwell time of each (point) span.
+        stop_before: ``(n,)`` bool, the motion must be at rest where the span starts.
+        v_max, a_max: ``(3,)`` limits of the x, y, z axes to plan at: the machine's, already reduced by
+            :data:`NUMERIC_MARGIN` (``inf`` where the machine lacks an axis).
+        machine: the machine (tick rate, tolerances, ...).
+        j_max: optional ``(3,)`` jerk limits of the x, y, z axes, reduced the same way (``inf`` where unset
+            or absent).
+        hold_caps: optional ``(k, 3)`` rows ``(s_lo, s_hi, v)``: the speed stays ≤ ``v`` mm/s between
+            path lengths ``s_lo`` and ``s_hi`` mm from the program start. The S-curve stage asks for flat
+            speed minima this way, of planners that declare ``honours_holds``; the others get ``None``.
+    """
+
+    spans: Spans
+    feed_mm_s: np.ndarray
+    dwell_s: np.ndarray
+    stop_before: np.ndarray
+    v_max: np.ndarray
+    a_max: np.ndarray
+    machine: MachineConfig
+    j_max: np.ndarray | None = None
+    hold_caps: np.ndarray | None = None
+
+
+class DeviceLaw(NamedTuple):
+    """A time law as the tick stage's compiled kernel reads it.
+
+    Attributes:
+        fn: a pure, jittable function ``fn(arrays, ticks) -> (span, s)``: for integer ``ticks`` ``(m,)``
+            (int64) the span index ``(m,)`` and the path parameter within that span ``(m,)`` (mm). It is a
+            *static* argument of the kernel: hashable, and equal for time laws that share a compiled
+            program (a module-level function, or a frozen dataclass with ``__call__``).
+        arrays: a dict of device arrays (any pytree) ``fn`` reads; sizes padded to buckets
+            (:mod:`jaxcnc.buckets`) so that jobs of similar size share the compiled kernel.
+    """
+
+    fn: Callable[[Any, Any], tuple[Any, Any]]
+    arrays: dict
+
+
+class TimeLaw(abc.ABC):
+    """The time law ``s(t)`` of a whole program, whatever planned it: what the tick stage samples.
+
+    The path is described in *segments* (a span, or a piece of one) in path order; every time law has
+    these attributes (dataclass fields or properties):
+
+    Attributes:
+        tick_hz: the tick rate (Hz).
+        n_ticks: the table has ticks ``0..n_ticks``.
+        span: ``(n_segments,)`` the span each segment lies on.
+        s_start: ``(n_segments,)`` mm from the span's start to the segment's start.
+        length: ``(n_segments,)`` mm of path the segment covers.
+    """
+
+    tick_hz: float
+    n_ticks: int
+    span: np.ndarray
+    s_start: np.ndarray
+    length: np.ndarray
+
+    @property
+    def total_time_s(self) -> float:
+        return self.n_ticks / self.tick_hz
+
+    def __len__(self) -> int:
+        return int(self.length.shape[0])
+
+    @abc.abstractmethod
+    def span_start_ticks(self, n_spans: int) -> np.ndarray:
+        """``(n_spans,)`` int64, the first tick at or after each span's start (block and laser events)."""
+
+    @abc.abstractmethod
+    def ticks_at(self, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """``(m,)`` int64, the tick at which segment ``seg`` ``(m,)`` has covered ``s`` ``(m,)`` mm (PSO pulses)."""
+
+    @abc.abstractmethod
+    def device_law(self) -> DeviceLaw:
+        """The arrays and the static function the tick stage's kernel samples (see :class:`DeviceLaw`)."""
+
+
+class Planner(abc.ABC):
+    """A velocity planner: a :class:`PlanRequest` in, a :class:`TimeLaw` out.
+
+    Capabilities are declared as class attributes (an instance may override them):
+
+    Attributes:
+        name: the name it is registered under by default (``--planner NAME``).
+        handles_jerk: it honours ``request.j_max`` itself. Otherwise, when the machine sets ``j_max``,
+            :func:`~jaxcnc.planners.plan_job` runs it inside the S-curve stage
+            (:mod:`jaxcnc.planners.smoothing`), which averages its time law — it must then return a
+            :class:`~jaxcnc.planners.timelaw.Plan`.
+        honours_holds: it honours ``request.hold_caps`` (speed caps on stretches of the path, which the
+            S-curve stage asks for); a planner without it is never given any.
+
+    Limits: plan at the request's limits; they are already below the machine's by the margin (module
+    docstring). ``jaxcnc check`` verifies the table independently, whatever the planner did.
+    """
+
+    name: str = ""
+    handles_jerk: bool = False
+    honours_holds: bool = False
+
+    @abc.abstractmethod
+    def plan(self, request: PlanRequest) -> TimeLaw:
+        """The time law of the request's whole program."""
+
+    def __call__(self, request: PlanRequest) -> TimeLaw:
+        return self.plan(request)
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r}>"
+
+
+class FunctionPlanner(Planner):
+    """A plain function ``(PlanRequest) -> TimeLaw`` as a :class:`Planner`, its capabilities declared here."""
+
+    def __init__(
+        self,
+        fn: Callable[[PlanRequest], TimeLaw],
+        name: str | None = None,
+        *,
+        handles_jerk: bool = False,
+        honours_holds: bool = False,
+    ):
+        self.fn = fn
+        self.name = name or getattr(fn, "__name__", "")
+        self.handles_jerk, self.honours_holds = handles_jerk, honours_holds
+
+    def plan(self, request: PlanRequest) -> TimeLaw:
+        return self.fn(request)
+
+
+def as_planner(obj: Any, name: str | None = None) -> Planner:
+    """A :class:`Planner` from a Planner instance, a Planner subclass (instantiated without arguments) or a
+    plain function (wrapped in :class:`FunctionPlanner`, no capabilities)."""
+    if isinstance(obj, Planner):
+        return obj
+    if isinstance(obj, type) and issubclass(obj, Planner):
+        return obj()
+    if callable(obj) and not isinstance(obj, type):
+        return FunctionPlanner(obj, name)
+    raise TypeError(f"{obj!r} is not a Planner (subclass jaxcnc.planners.Planner and implement plan())")

@@ -1,0 +1,131 @@
+"""Plug-ins by name: one registry mechanism for every extension point, fed by built-ins and entry points.
+
+Each extension point owns one :class:`Registry`, kept beside the protocol its items implement:
+
+=====================================  ==========================  ==============================================
+registry                               entry-point group           an item is (looked up by)
+=====================================  ==========================  ==============================================
+``jaxcnc.planners.registry.PLANNERS``  ``jaxcnc.planners``         a :class:`~jaxcnc.planners.protocol.Planner`
+                                                                   subclass or instance (``--planner NAME``,
+                                                                   ``[machine] planner``, ``plan_job(planner=)``)
+``jaxcnc.planners.pulsed.request.``    ``jaxcnc.pulse_planners``   a callable ``(PulseRequest) -> PulsePlan``
+``PULSE_PLANNERS``                                                 (``--planner NAME`` on point jobs)
+``jaxcnc.jobs.FRONT_ENDS``             ``jaxcnc.front_ends``       a :class:`~jaxcnc.jobs.FrontEnd` subclass or
+                                                                   instance (the input's suffix, without the dot)
+``jaxcnc.hw.sinks.SINKS``              ``jaxcnc.sinks``            a callable ``(spec, **options) -> Sink``
+                                                                   (``--sink NAME``, or ``NAME://...``)
+=====================================  ==========================  ==============================================
+
+Built-ins register when their module is imported (``register`` used as a decorator). A third-party
+distribution adds items by declaring entry points, e.g. in its ``pyproject.toml``::
+
+    [project.entry-points."jaxcnc.planners"]
+    gentle = "slow_planner:GentlePlanner"
+
+An entry point is loaded on the first lookup of its name only (importing a plug-in costs nothing until
+it is used, and a broken plug-in does not break the others); a plug-in that fails to load is reported
+in one line naming it, its distribution and the cause. Built-in names win over entry points of the
+same name. An unknown name is an error listing the known ones.
+
+This module imports the standard library alone: the player side (``jaxcnc.hw``, NumPy only) uses it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from importlib.metadata import EntryPoint, entry_points
+from typing import Any, Generic, TypeVar
+
+from jaxcnc.errors import JaxcncError
+
+T = TypeVar("T")
+
+#: The entry-point groups jaxcnc reads, and what an entry point of each names.
+GROUPS = {
+    "jaxcnc.planners": "a Planner subclass or instance (contour velocity planner)",
+    "jaxcnc.pulse_planners": "a callable (PulseRequest) -> PulsePlan (pulsed point jobs)",
+    "jaxcnc.front_ends": "a FrontEnd subclass or instance; the entry point's name is the file suffix",
+    "jaxcnc.sinks": "a callable (spec, **options) -> Sink; the name is the sink's name or URL scheme",
+}
+
+
+class PluginError(JaxcncError):
+    """A plug-in that cannot be found or loaded (reported in one line, exit status 2)."""
+
+
+class Registry(Generic[T]):
+    """Named items of one kind: registered in code or found through the entry-point ``group``.
+
+    Args:
+        what: what an item is, for messages (``"planner"``).
+        group: the entry-point group third-party distributions declare items in.
+        adapt: turns what was registered or loaded into an item (e.g. a class into an instance); it may
+            raise ``TypeError`` for an object of the wrong kind, reported naming the plug-in.
+        error: the error class raised for unknown names and broken plug-ins.
+    """
+
+    def __init__(
+        self,
+        what: str,
+        group: str,
+        adapt: Callable[[Any], T] | None = None,
+        error: type[JaxcncError] = PluginError,
+    ):
+        self.what, self.group, self.error = what, group, error
+        self._adapt = adapt or (lambda obj: obj)
+        self._items: dict[str, T] = {}
+        self._entry_points: dict[str, EntryPoint] | None = None  # found on first need
+
+    def register(self, name: str, item: Any = None):
+        """Make ``item`` available under ``name``; without ``item``, a decorator returning what it decorates."""
+        if item is None:
+
+            def deco(obj):
+                self._items[name] = self._adapt(obj)
+                return obj
+
+            return deco
+        self._items[name] = self._adapt(item)
+        return item
+
+    def get(self, name: str) -> T:
+        """The item named ``name``: registered, or loaded from its entry point on this first lookup."""
+        if name in self._items:
+            return self._items[name]
+        ep = self.entry_points().get(name)
+        if ep is None:
+            raise self.error(f"unknown {self.what} {name!r}; known: {', '.join(self.names())}")
+        self._items[name] = self._load(ep)
+        return self._items[name]
+
+    def names(self) -> list[str]:
+        """Every name that :meth:`get` knows, built-in or from an entry point (none is loaded)."""
+        return sorted(set(self._items) | set(self.entry_points()))
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._items or name in self.entry_points()
+
+    def entry_points(self) -> dict[str, EntryPoint]:
+        """The group's entry points by name (read once; built-in names shadow them)."""
+        if self._entry_points is None:
+            found: dict[str, EntryPoint] = {}
+            for ep in entry_points(group=self.group):
+                if ep.name not in found:  # the first on sys.path wins, as for imports
+                    found[ep.name] = ep
+            self._entry_points = found
+        return {k: v for k, v in self._entry_points.items() if k not in self._items}
+
+    def forget_entry_points(self) -> None:
+        """Read the entry points again on the next lookup (after installing a distribution at run time)."""
+        self._entry_points = None
+
+    def _load(self, ep: EntryPoint) -> T:
+        dist = getattr(getattr(ep, "dist", None), "name", None)
+        where = f"{ep.value}" + (f" from distribution {dist!r}" if dist else "")
+        try:
+            return self._adapt(ep.load())
+        except Exception as exc:  # any failure of third-party code: one line naming the plug-in
+            cause = f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
+            raise self.error(
+                f"{self.what} plug-in {ep.name!r} ({where}, entry-point group {self.group}) failed to load: {cause}"
+            ) from None
