@@ -10,13 +10,14 @@ registry                               entry-point group           an item is (l
                                                                    ``[machine] planner``, ``plan_job(planner=)``)
 ``jaxcnc.planners.pulsed.request.``    ``jaxcnc.pulse_planners``   a callable ``(PulseRequest) -> PulsePlan``
 ``PULSE_PLANNERS``                                                 (``--planner NAME`` on point jobs)
-``jaxcnc.jobs.FRONT_ENDS``             ``jaxcnc.front_ends``       a :class:`~jaxcnc.jobs.FrontEnd` subclass or
-                                                                   instance (the input's suffix, without the dot)
+``jaxcnc.front_ends.FRONT_ENDS``       ``jaxcnc.front_ends``       a :class:`~jaxcnc.front_ends.FrontEnd` subclass
+                                                                   or instance (the input's suffix, no dot)
 ``jaxcnc.hw.sinks.SINKS``              ``jaxcnc.sinks``            a callable ``(spec, **options) -> Sink``
                                                                    (``--sink NAME``, or ``NAME://...``)
 =====================================  ==========================  ==============================================
 
-Built-ins register when their module is imported (``register`` used as a decorator). A third-party
+Built-ins register when their module is imported (``register`` used as a decorator), or are named by
+``"module:attribute"`` and imported on first use (:meth:`Registry.register_lazy`). A third-party
 distribution adds items by declaring entry points, e.g. in its ``pyproject.toml``::
 
     [project.entry-points."jaxcnc.planners"]
@@ -33,6 +34,7 @@ This module imports the standard library alone: the player side (``jaxcnc.hw``, 
 from __future__ import annotations
 
 from collections.abc import Callable
+from importlib import import_module
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any, Generic, TypeVar
 
@@ -74,6 +76,7 @@ class Registry(Generic[T]):
         self.what, self.group, self.error = what, group, error
         self._adapt = adapt or (lambda obj: obj)
         self._items: dict[str, T] = {}
+        self._lazy: dict[str, str] = {}  # built-ins by "module:attribute", imported on first lookup
         self._entry_points: dict[str, EntryPoint] | None = None  # found on first need
 
     def register(self, name: str, item: Any = None):
@@ -88,9 +91,20 @@ class Registry(Generic[T]):
         self._items[name] = self._adapt(item)
         return item
 
+    def register_lazy(self, name: str, target: str) -> None:
+        """A built-in item at ``target`` (``"package.module:attribute"``), imported on its first lookup:
+        listing names costs no import (the player side never imports the planning stack this way)."""
+        self._lazy[name] = target
+
     def get(self, name: str) -> T:
         """The item named ``name``: registered, or loaded from its entry point on this first lookup."""
         if name in self._items:
+            return self._items[name]
+        if name in self._lazy:
+            module, _, attr = self._lazy[name].partition(":")
+            obj = getattr(import_module(module), attr)
+            if name not in self._items:  # importing may have registered it already
+                self._items[name] = self._adapt(obj)
             return self._items[name]
         ep = self.entry_points().get(name)
         if ep is None:
@@ -100,10 +114,10 @@ class Registry(Generic[T]):
 
     def names(self) -> list[str]:
         """Every name that :meth:`get` knows, built-in or from an entry point (none is loaded)."""
-        return sorted(set(self._items) | set(self.entry_points()))
+        return sorted(set(self._items) | set(self._lazy) | set(self.entry_points()))
 
     def __contains__(self, name: object) -> bool:
-        return name in self._items or name in self.entry_points()
+        return name in self._items or name in self._lazy or name in self.entry_points()
 
     def entry_points(self) -> dict[str, EntryPoint]:
         """The group's entry points by name (read once; built-in names shadow them)."""
@@ -113,7 +127,7 @@ class Registry(Generic[T]):
                 if ep.name not in found:  # the first on sys.path wins, as for imports
                     found[ep.name] = ep
             self._entry_points = found
-        return {k: v for k, v in self._entry_points.items() if k not in self._items}
+        return {k: v for k, v in self._entry_points.items() if k not in self._items and k not in self._lazy}
 
     def forget_entry_points(self) -> None:
         """Read the entry points again on the next lookup (after installing a distribution at run time)."""

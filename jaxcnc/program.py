@@ -10,11 +10,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from enum import IntEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from jaxcnc.machine import MachineConfig
+
 #: The program's coordinate axes, in column order of ``start``/``end``/``center``.
 PROGRAM_AXES = ("x", "y", "z")
+
+
+def program_start(machine: MachineConfig) -> np.ndarray:
+    """``(3,)`` program position (x, y, z) mm where every job starts: each axis' home, 0 for axes the
+    machine lacks. Front ends start programs here, planners plan from here, ``check`` compares with it."""
+    names = machine.axis_names
+    return np.array([machine.axis(a).home if a in names else 0.0 for a in PROGRAM_AXES])
 
 
 class Kind(IntEnum):
@@ -249,3 +260,40 @@ def program_from_columns(file: str = "<memory>", curves: CurveTable | None = Non
 
 #: The per-row columns of a :class:`Program`, in field order.
 PROGRAM_COLUMNS = tuple(f.name for f in fields(Program) if f.name not in ("file", "curves"))
+
+
+@dataclass(frozen=True, eq=False)
+class PointJob:
+    """Points to burn, in the order given.
+
+    Attributes:
+        points: ``(n, 3)`` x, y, z in mm.
+        energy: ``(n,)`` per-point pulse energy, or ``None`` when the file gives none.
+        line: ``(n,)`` source line of each point (1-based).
+        file: where the points came from.
+        index: ``(n,)`` each point's position in its file (0-based); differs from ``arange(n)``
+            once the points are re-ordered.
+    """
+
+    points: np.ndarray
+    energy: np.ndarray | None
+    line: np.ndarray
+    file: str
+    index: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.index is None:
+            object.__setattr__(self, "index", np.arange(self.points.shape[0], dtype=np.int64))
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def take(self, order: np.ndarray) -> PointJob:
+        """The same points in another order (``order`` indexes the current one)."""
+        return PointJob(
+            points=self.points[order],
+            energy=None if self.energy is None else self.energy[order],
+            line=self.line[order],
+            file=self.file,
+            index=self.index[order],
+        )

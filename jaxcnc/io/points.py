@@ -16,55 +16,17 @@ NumPy only: the table checker reads point files too.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from jaxcnc.errors import SourceError
-from jaxcnc.program import Kind
+from jaxcnc.program import Kind, PointJob
 
 POINT_SUFFIXES = (".xyz", ".csv")
 #: Two consecutive points closer than this (mm) are the same point.
 SAME_POINT_MM = 1e-9
 _SEP = re.compile(r"[,;\s]+")
-
-
-@dataclass(frozen=True, eq=False)
-class PointJob:
-    """Points to burn, in the order given.
-
-    Attributes:
-        points: ``(n, 3)`` x, y, z in mm.
-        energy: ``(n,)`` per-point pulse energy, or ``None`` when the file gives none.
-        line: ``(n,)`` source line of each point (1-based).
-        file: where the points came from.
-        index: ``(n,)`` each point's position in its file (0-based); differs from ``arange(n)``
-            once the points are re-ordered.
-    """
-
-    points: np.ndarray
-    energy: np.ndarray | None
-    line: np.ndarray
-    file: str
-    index: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        if self.index is None:
-            object.__setattr__(self, "index", np.arange(self.points.shape[0], dtype=np.int64))
-
-    def __len__(self) -> int:
-        return int(self.points.shape[0])
-
-    def take(self, order: np.ndarray) -> PointJob:
-        """The same points in another order (``order`` indexes the current one)."""
-        return PointJob(
-            points=self.points[order],
-            energy=None if self.energy is None else self.energy[order],
-            line=self.line[order],
-            file=self.file,
-            index=self.index[order],
-        )
 
 
 def _is_header(fields: list[str]) -> bool:

@@ -7,10 +7,11 @@ group (:mod:`jaxcnc.plugins`).
 """
 
 from jaxcnc.planners import casadi_ref, lookahead_planner, topp, toppra_ref  # noqa: F401  (register the planners)
-from jaxcnc.planners.job import PlannedJob, plan_job, program_start
+from jaxcnc.planners.job import PlannedJob, plan_job
 from jaxcnc.planners.protocol import NUMERIC_MARGIN, DeviceLaw, Planner, PlanRequest, TimeLaw, with_margin
 from jaxcnc.planners.registry import PLANNERS, get_planner, planner_names, register_planner
 from jaxcnc.planners.timelaw import Plan, sample_plan
+from jaxcnc.program import program_start
 
 __all__ = [
     "NUMERIC_MARGIN",

@@ -41,12 +41,6 @@ class PlannedJob:
         return float(np.sum(self.spans.length))
 
 
-def program_start(machine: MachineConfig) -> np.ndarray:
-    """Machine position (x, y, z) at program start: each axis' home, 0 for absent axes."""
-    names = machine.axis_names
-    return np.array([machine.axis(a).home if a in names else 0.0 for a in PROGRAM_AXES])
-
-
 def _check_axes(program: Program, machine: MachineConfig) -> tuple[int, ...]:
     names = machine.axis_names
     for col, axis in enumerate(PROGRAM_AXES):

@@ -56,7 +56,7 @@ import numpy as np
 from jaxcnc.errors import JaxcncError
 from jaxcnc.format import EventKind, TableFile, file_sha256
 from jaxcnc.machine import MachineConfig
-from jaxcnc.program import PROGRAM_AXES, Kind, Program
+from jaxcnc.program import PROGRAM_AXES, Kind, Program, program_start
 from jaxcnc.ticks.verify import TableRows, Violation, _runs
 
 #: Numeric slack added to every tolerance (mm): far above the table's fixed point (2^-32 discrete) and
@@ -436,11 +436,6 @@ class ProgramPath:
 
 # ----------------------------------------------------------------------------------------------
 # Loading the program of a table, and the check itself
-
-
-def program_start(machine: MachineConfig) -> np.ndarray:
-    """Program position (x, y, z) at the start: each axis' home, 0 for axes the machine lacks (as planned)."""
-    return np.array([machine.axis(a).home if a in machine.axis_names else 0.0 for a in PROGRAM_AXES])
 
 
 def program_for_table(

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jaxcnc.format import FINE_SCALE, EventKind, TableFile
-from jaxcnc.io.points import PointJob
 from jaxcnc.machine import MachineConfig
+from jaxcnc.program import PointJob
 from jaxcnc.ticks.verify import Violation
 
 #: A work pulse hits its point when the beam is within this many discretes of it (each axis).

@@ -18,9 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from jaxcnc.errors import SourceError
-from jaxcnc.io.points import PointJob
 from jaxcnc.machine import MachineConfig
-from jaxcnc.planners.job import outside_travel, program_start
+from jaxcnc.planners.job import outside_travel
 from jaxcnc.planners.protocol import request_limits, with_margin
 from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (register the planners)
 from jaxcnc.planners.pulsed.request import (
@@ -31,7 +30,7 @@ from jaxcnc.planners.pulsed.request import (
     register_pulse_planner,
 )
 from jaxcnc.planners.pulsed.windows import PulseWindow, pulse_window
-from jaxcnc.program import PROGRAM_AXES
+from jaxcnc.program import PROGRAM_AXES, PointJob, program_start
 
 DEFAULT_PULSE_PLANNER = "sync"
 
