@@ -1,8 +1,8 @@
 """Jobs: any supported input, planned on a machine into a verified table, with its report.
 
 This is what ``jaxcnc plan`` and ``jaxcnc check`` do, as a library: the command line only parses its
-arguments and prints. The input's type comes from its suffix — G-code (``GCODE_SUFFIXES``) or a point
-file for pulsed engraving (``POINT_SUFFIXES``); G-code on a machine whose laser is pulsed is a point
+arguments and prints. The input's front end comes from its suffix (:mod:`jaxcnc.front_ends`: G-code,
+point files for pulsed engraving, plug-ins); a program on a machine whose laser is pulsed is a point
 job too (every G1 end point burned by one pulse). A job goes through four stages — parse, plan, ticks,
 verify — shown by a progress bar on a terminal; verification is independent of the planner: the
 table's limits at every tick (:mod:`jaxcnc.ticks.verify`), every tick's distance from the programmed
@@ -17,15 +17,18 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from jaxcnc.errors import JaxcncError
+from jaxcnc.front_ends import FRONT_ENDS, GCODE_SUFFIXES, POINT_SUFFIXES, front_end_for  # noqa: F401  (part of this API)
 from jaxcnc.machine import MachineConfig, load_machine
+from jaxcnc.program import PointJob, Program
 
-GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
-POINT_SUFFIXES = (".xyz", ".csv")
-LATER_SUFFIXES = {".dxf": "DXF", ".stl": "STL"}
+if TYPE_CHECKING:
+    from jaxcnc.format import TableFile
+
 STAGES = ("parse", "plan", "ticks", "verify")
 
 
@@ -59,45 +62,30 @@ def _machine(machine: MachineConfig | str | Path) -> MachineConfig:
     return machine if isinstance(machine, MachineConfig) else load_machine(machine)
 
 
-def load_program(path: str | Path, machine: MachineConfig, dialect: str | None = None):
-    """A G-code program as a :class:`~jaxcnc.program.Program`, starting where the machine is homed."""
-    from jaxcnc.gcode import load_gcode
-    from jaxcnc.planners import program_start
-
+def load_program(path: str | Path, machine: MachineConfig, dialect: str | None = None) -> Program:
+    """The contour program in ``path`` (G-code, or any front end that produces a
+    :class:`~jaxcnc.program.Program`), starting where the machine is homed."""
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix in LATER_SUFFIXES:
-        raise JaxcncError(f"{path}: {LATER_SUFFIXES[suffix]} input is not supported yet")
-    if suffix not in GCODE_SUFFIXES:
-        raise JaxcncError(
-            f"{path}: unknown input type {suffix!r}; G-code files end in {', '.join(GCODE_SUFFIXES)}, "
-            f"point files in {', '.join(POINT_SUFFIXES)}"
-        )
-    start = program_start(machine)
-    return load_gcode(path, start=start, home=start, dialect=dialect)
+    fe = front_end_for(path)
+    if fe.produces != "program":
+        raise JaxcncError(f"{path}: a {fe.name} holds points, not a program; it is planned as a point job")
+    return fe.load(path, machine, dialect=dialect)
 
 
 def is_point_job(input_path: str | Path, machine: MachineConfig) -> bool:
-    """Point-by-point pulsed engraving: a point file, or G-code on a machine whose laser is pulsed."""
-    input_path = Path(input_path)
-    if input_path.suffix.lower() in POINT_SUFFIXES:
-        if machine.laser.mode != "pulsed":
-            raise JaxcncError(
-                f'{input_path}: point files are burned point by point, which needs [laser] mode = "pulsed" '
-                f"(machine {machine.name!r} has mode {machine.laser.mode!r})"
-            )
-        return True
-    return machine.laser.mode == "pulsed"
+    """Point-by-point pulsed engraving: a point file, or a program on a machine whose laser is pulsed."""
+    return front_end_for(input_path).produces == "points" or machine.laser.mode == "pulsed"
 
 
-def load_point_job(input_path: str | Path, machine: MachineConfig, dialect: str | None = None):
+def load_point_job(input_path: str | Path, machine: MachineConfig, dialect: str | None = None) -> PointJob:
     """The points of a point job: read from a point file, or the G1 end points of a program."""
-    from jaxcnc.io.points import points_from_program, read_points
+    from jaxcnc.io.points import points_from_program
 
     input_path = Path(input_path)
-    if input_path.suffix.lower() in POINT_SUFFIXES:
-        return read_points(input_path)
-    return points_from_program(load_program(input_path, machine, dialect))
+    fe = front_end_for(input_path)
+    if fe.produces == "points":
+        return fe.load(input_path, machine, dialect=dialect)
+    return points_from_program(fe.load(input_path, machine, dialect=dialect))
 
 
 def plan_file(
@@ -115,9 +103,7 @@ def plan_file(
         return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
     if reorder:
         raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
-    from jaxcnc.planners.registry import DEFAULT_PLANNER
-
-    return plan_program_file(input_path, machine, out, planner or DEFAULT_PLANNER, progress, dialect)
+    return plan_program_file(input_path, machine, out, planner, progress, dialect)
 
 
 def measured(meas) -> dict:
@@ -134,17 +120,19 @@ def plan_program_file(
     input_path: str | Path,
     machine: MachineConfig,
     out: str | Path,
-    planner: str,
+    planner: str | None = None,
     progress: bool | None = None,
     dialect: str | None = None,
 ) -> dict:
     """Plan a contour program (G-code), write its table and verify it (limits, the path); the report."""
     from jaxcnc.format import TableFile
     from jaxcnc.planners import plan_job
+    from jaxcnc.planners.job import machine_planner
     from jaxcnc.ticks.deviation import path_deviation
     from jaxcnc.ticks.table import write_table
     from jaxcnc.ticks.verify import measure_table
 
+    planner = planner or machine_planner(machine)
     st = Stages(progress, f"planning {Path(input_path).name}")
     try:
         with st.stage("parse"):
@@ -198,7 +186,7 @@ def plan_points_file(
     from jaxcnc.ticks.verify import measure_table
     from jaxcnc.ticks.verify_pulses import check_pulses
 
-    planner = planner or DEFAULT_PULSE_PLANNER
+    planner = planner or machine.planner or DEFAULT_PULSE_PLANNER
     st = Stages(progress, f"planning {Path(input_path).name}")
     try:
         with st.stage("parse"):
@@ -263,7 +251,7 @@ def check_table(
     path (``None`` when not compared; ``path_note`` says why: no G-code source, or it is not here).
     """
     from jaxcnc.format import EventKind, TableFile
-    from jaxcnc.ticks.deviation import path_deviation, program_for_table
+    from jaxcnc.ticks.deviation import path_deviation
     from jaxcnc.ticks.verify import measure_table
 
     machine = _machine(machine)
@@ -275,13 +263,56 @@ def check_table(
         job = points_of_table(table, machine, points)
         meas.pulses = check_pulses(table, machine, job)
         meas.violations.extend(meas.pulses.violations)
-    prog, meas.path_note = program_for_table(
-        table, machine, GCODE_SUFFIXES, Path(program) if program else None, dialect
-    )
+    prog, meas.path_note = program_for_table(table, machine, Path(program) if program else None, dialect)
     if prog is not None:
         meas.path = path_deviation(table, machine, prog)
         meas.violations.extend(meas.path.violations)
     return table, meas
+
+
+def program_for_table(
+    table: TableFile,
+    machine: MachineConfig,
+    program: Path | None = None,
+    dialect: str | None = None,
+) -> tuple[Program | None, str]:
+    """The Program to compare ``table`` with, or ``(None, why not)``.
+
+    With ``program`` that file is read (it must exist: a missing one raises
+    :class:`~jaxcnc.errors.JaxcncError`, as does one that cannot be parsed). Without it the table's
+    header names the source (a relative name is looked for from the working directory, then from the
+    table's folder); it is compared only when a front end reads it as a program, and it is present and
+    unchanged (its SHA-256 equals the header's ``source_sha256``) and parses — otherwise the
+    reason is returned and the check is skipped, which is neither a pass nor a failure.
+    """
+    from jaxcnc.errors import SourceError
+    from jaxcnc.format import EventKind, file_sha256
+
+    if not np.any(table.events["kind"] == EventKind.BLOCK):
+        return None, "the table has no block events (a point job?): nothing ties its ticks to program rows"
+    if program is not None:
+        if not Path(program).is_file():
+            raise JaxcncError(f"{program}: no such program file")
+        return load_program(program, machine, dialect), ""
+    meta = table.header.meta
+    source = str(meta.get("source", ""))
+    if not source:
+        return None, "the table names no source program; pass --program FILE"
+    src = Path(source)
+    fe = FRONT_ENDS.get(src.suffix.lower()[1:]) if src.suffix.lower()[1:] in FRONT_ENDS else None
+    if fe is None or fe.produces != "program":
+        return None, f"its source {source!r} is not a program (G-code or a drawing)"
+    if not src.is_file() and not src.is_absolute() and (table.path.parent / src).is_file():
+        src = table.path.parent / src  # planned from the table's folder
+    if not src.is_file():
+        return None, f"its source program {source!r} is not here; pass --program FILE"
+    want = meta.get("source_sha256")
+    if want and file_sha256(src) != want:
+        return None, f"{source} changed since the table was planned (checksum differs); pass --program FILE"
+    try:
+        return fe.load(src, machine, dialect=dialect), ""
+    except SourceError as exc:
+        return None, f"its source cannot be read ({exc}); pass --dialect or --program"
 
 
 def points_of_table(table, machine: MachineConfig, points: str | Path | None):

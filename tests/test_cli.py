@@ -158,10 +158,11 @@ def test_bad_program_exits_2_with_location_and_no_table(tmp_path, program, needl
 
 
 def test_unsupported_input_type(tmp_path, capsys):
-    f = tmp_path / "part.dxf"
-    f.write_text("0\nEOF\n")
+    f = tmp_path / "part.svg"
+    f.write_text("<svg/>")
     assert main(["plan", str(f), "-m", str(EXAMPLE_MACHINE), "-o", str(tmp_path / "o.ticks")]) == 2
-    assert "DXF input is not supported yet" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "part.svg: unknown input type '.svg'; jaxcnc reads " in err and ".ngc" in err and ".xyz" in err
 
 
 def test_unknown_planner(tmp_path, capsys):

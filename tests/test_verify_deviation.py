@@ -12,18 +12,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
-from jaxcnc.cli.main import GCODE_SUFFIXES, main
+from jaxcnc.cli.main import main
 from jaxcnc.errors import JaxcncError
 from jaxcnc.format import FINE_SCALE, EventKind, TableFile, TableWriter, file_sha256
 from jaxcnc.gcode import parse_gcode
+from jaxcnc.jobs import program_for_table
+from jaxcnc.program import program_start
 from jaxcnc.ticks.deviation import (
     SLACK_MM,
     CurveDistance,
     ProgramPath,
     path_deviation,
     point_arc_distance,
-    program_for_table,
-    program_start,
     segment_distance,
 )
 from jaxcnc.ticks.verify import Violation
@@ -361,22 +361,22 @@ def test_program_for_table_skips_and_errors(tmp_path: Path) -> None:
     def with_meta(**meta) -> TableFile:
         return _rewrite(table, tmp_path / "m.ticks", table.exact_mm(), {**table.header.meta, **meta})
 
-    prog, note = program_for_table(table, machine, GCODE_SUFFIXES)  # source "test.ngc": not here
+    prog, note = program_for_table(table, machine)  # source "test.ngc": not here
     assert prog is None and "not here" in note
-    prog, note = program_for_table(with_meta(source=str(program)), machine, GCODE_SUFFIXES)
+    prog, note = program_for_table(with_meta(source=str(program)), machine)
     assert prog is not None and note == "" and len(prog) == table.header.meta["n_blocks"]
-    prog, note = program_for_table(with_meta(source=str(program), source_sha256="0" * 64), machine, GCODE_SUFFIXES)
+    prog, note = program_for_table(with_meta(source=str(program), source_sha256="0" * 64), machine)
     assert prog is None and "changed since" in note
-    prog, note = program_for_table(with_meta(source=str(tmp_path / "pts.xyz")), machine, GCODE_SUFFIXES)
-    assert prog is None and "not a G-code program" in note
-    prog, note = program_for_table(table, machine, GCODE_SUFFIXES, program=program)  # explicit: no checksum
+    prog, note = program_for_table(with_meta(source=str(tmp_path / "pts.xyz")), machine)
+    assert prog is None and "is not a program" in note
+    prog, note = program_for_table(table, machine, program=program)  # explicit: no checksum
     assert prog is not None
     with pytest.raises(JaxcncError, match="no such program"):
-        program_for_table(table, machine, GCODE_SUFFIXES, program=tmp_path / "missing.ngc")
+        program_for_table(table, machine, program=tmp_path / "missing.ngc")
     with TableWriter(tmp_path / "nb.ticks", axes=["x", "y", "z"], tick_hz=1e4, discrete_mm=1e-3, n_rows=2) as w:
         w.write(np.zeros((2, 3), np.int32), np.zeros((2, 3), np.int32))
     no_blocks = TableFile(tmp_path / "nb.ticks")
-    prog, note = program_for_table(no_blocks, machine, GCODE_SUFFIXES, program=program)
+    prog, note = program_for_table(no_blocks, machine, program=program)
     assert prog is None and "no block events" in note
 
 

@@ -382,8 +382,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--report", "-r", help="write a JSON report (times, lengths, measured max v/a/j per axis)")
     sp.add_argument(
         "--planner",
-        help="velocity planner: lookahead (contours, default); for pulsed point jobs sync (default), seed "
-        "(the source documents' per-block method) or stop-and-go (the old scheme)",
+        help="velocity planner by name (default: [machine] planner, else topp): for contours topp (time-optimal, "
+        "per-axis limits coupled exactly), lookahead (junction look-ahead), toppra, casadi; for pulsed point jobs "
+        "sync (default), seed (the source documents' per-block method), stop-and-go; or a plug-in's name "
+        "(entry-point groups jaxcnc.planners, jaxcnc.pulse_planners)",
     )
     sp.add_argument(
         "--reorder",
@@ -392,8 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sp.add_argument(
         "--dialect",
-        default="linuxcnc",
-        help="G-code dialect: linuxcnc, siemens, fanuc, or a dialect TOML file (default: %(default)s)",
+        help="G-code dialect: linuxcnc (default), siemens, fanuc, or a dialect TOML file",
     )
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
     sp.set_defaults(func=cmd_plan, needs=("jax",))

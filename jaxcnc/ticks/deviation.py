@@ -49,12 +49,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from jaxcnc.errors import JaxcncError
-from jaxcnc.format import EventKind, TableFile, file_sha256
+from jaxcnc.format import EventKind, TableFile
 from jaxcnc.machine import MachineConfig
 from jaxcnc.program import PROGRAM_AXES, Kind, Program, program_start
 from jaxcnc.ticks.verify import TableRows, Violation, _runs
@@ -436,52 +435,6 @@ class ProgramPath:
 
 # ----------------------------------------------------------------------------------------------
 # Loading the program of a table, and the check itself
-
-
-def program_for_table(
-    table: TableFile,
-    machine: MachineConfig,
-    gcode_suffixes: tuple[str, ...],
-    program: Path | None = None,
-    dialect: str | None = None,
-) -> tuple[Program | None, str]:
-    """The Program to compare ``table`` with, or ``(None, why not)``.
-
-    With ``program`` that file is read (it must exist: a missing one raises
-    :class:`~jaxcnc.errors.JaxcncError`, as does one that cannot be parsed). Without it the table's
-    header names the source (a relative name is looked for from the working directory, then from the
-    table's folder); it is compared only when it is a G-code file (``gcode_suffixes``) that is present and
-    unchanged (its SHA-256 equals the header's ``source_sha256``) and parses — otherwise the
-    reason is returned and the check is skipped, which is neither a pass nor a failure.
-    """
-    from jaxcnc.errors import SourceError
-    from jaxcnc.gcode import load_gcode
-
-    if not np.any(table.events["kind"] == EventKind.BLOCK):
-        return None, "the table has no block events (a point job?): nothing ties its ticks to program rows"
-    start = program_start(machine)
-    if program is not None:
-        if not Path(program).is_file():
-            raise JaxcncError(f"{program}: no such program file")
-        return load_gcode(program, start=start, home=start, dialect=dialect), ""
-    meta = table.header.meta
-    source = str(meta.get("source", ""))
-    if not source:
-        return None, "the table names no source program; pass --program FILE"
-    src = Path(source)
-    if src.suffix.lower() not in gcode_suffixes:
-        return None, f"its source {source!r} is not a G-code program"
-    if not src.is_file() and not src.is_absolute() and (table.path.parent / src).is_file():
-        src = table.path.parent / src  # planned from the table's folder
-    if not src.is_file():
-        return None, f"its source program {source!r} is not here; pass --program FILE"
-    want = meta.get("source_sha256")
-    if want and file_sha256(src) != want:
-        return None, f"{source} changed since the table was planned (checksum differs); pass --program FILE"
-    try:
-        return load_gcode(src, start=start, home=start, dialect=dialect), ""
-    except SourceError as exc:
-        return None, f"its source cannot be read ({exc}); pass --dialect or --program"
 
 
 def _block_rows(table: TableFile, program: Program) -> tuple[np.ndarray, np.ndarray]:
