@@ -87,12 +87,21 @@ def _previous_measure(table: TableFile, machine: MachineConfig, chunk_rows: int 
 
 
 def _write(path: Path, p_mm: np.ndarray, fine: bool = True, block_rows: int = 64, q: float = 0.001) -> TableFile:
-    """A table of exact positions ``p_mm`` ``(n, 3)`` (x, y, z) at 10 kHz, written in uneven pieces."""
+    """A table of exact positions ``p_mm`` ``(n, 3)`` (x, y, z) at 10 kHz, written in uneven pieces; its header
+    declares the first row as the job's start (``start_mm``), so the machine rests there before row 0 as the
+    reference assumes."""
     x = p_mm / q
     pos = np.round(x)
     res = np.clip(np.round((x - pos) * FINE_SCALE), -(2.0**31), 2.0**31 - 1)
     with TableWriter(
-        path, axes=["x", "y", "z"], tick_hz=10000, discrete_mm=q, n_rows=len(p_mm), fine=fine, block_rows=block_rows
+        path,
+        axes=["x", "y", "z"],
+        tick_hz=10000,
+        discrete_mm=q,
+        n_rows=len(p_mm),
+        fine=fine,
+        block_rows=block_rows,
+        meta={"start_mm": [float(v) for v in p_mm[0]]},
     ) as w:
         for a, b in ((0, len(p_mm) // 3), (len(p_mm) // 3, len(p_mm))):
             w.write(pos[a:b].astype(np.int32), res[a:b].astype(np.int32) if fine else None)

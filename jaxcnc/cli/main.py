@@ -196,9 +196,7 @@ def cmd_play(args: argparse.Namespace) -> int:
         from jaxcnc.machine import load_machine
 
         machine = load_machine(args.machine)
-        missing = [a for a in table.axes if a not in machine.axis_names]
-        if missing:
-            raise JaxcncError(f"{args.machine}: machine {machine.name!r} lacks the table's axes {missing}")
+        table.require_axes(machine.axis_names, f"machine {machine.name!r}")  # sinks send columns by position
         a_max = np.array([machine.axis(a).a_max for a in table.axes])
     options: dict = {}
     if args.sink == "sim":

@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
+import re
 import struct
 import zlib
 from dataclasses import dataclass
@@ -31,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import TableFileError
-from jaxcnc.format.events import EVENT_DTYPE
+from jaxcnc.format.events import EVENT_DTYPE, EventKind
 
 MAGIC = b"JXCNCTBL"
 VERSION = 1
@@ -40,6 +42,20 @@ DATA_ALIGN = 4096
 DEFAULT_BLOCK_ROWS = 4096
 FLAG_FINE = 1
 FINE_SCALE = 2.0**32  # fine units per discrete
+
+# Bounds a header must respect (docs/table-format.md, "Validation"): a reader refuses anything outside them.
+MAX_AXES = 32
+MAX_BLOCK_ROWS = 1 << 20
+MAX_JSON_BYTES = 1 << 20
+TICK_HZ_RANGE = (1.0, 1e6)
+DISCRETE_MM_RANGE = (1e-9, 0.1)
+#: An axis name: an ASCII letter, then up to 31 letters, digits or underscores.
+AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}", re.ASCII)
+# Metadata keys jaxcnc reads or writes, with the values they may hold (other keys are ignored).
+_META_TEXT = ("machine", "machine_file", "machine_sha256", "source", "source_sha256", "generator", "planner")
+_META_COUNT = ("n_blocks", "n_points")
+_META_NONNEG = ("total_time_s", "pulse_tolerance")
+_META_POSITIVE = ("pulse_hz",)
 
 # magic, version, n_axes, block_rows, flags, tick_hz, discrete_mm, n_rows, n_blocks, json_bytes,
 # n_events, events_crc, data_offset, events_offset; then the header CRC at byte 124.
@@ -117,7 +133,7 @@ def _align(n: int) -> int:
 
 
 def _pack_header(h: TableHeader) -> bytes:
-    meta = json.dumps(h.meta, sort_keys=True).encode("utf-8")
+    meta = json.dumps(h.meta, sort_keys=True, allow_nan=False).encode("utf-8")
     fixed = _HEADER.pack(
         MAGIC,
         VERSION,
@@ -137,6 +153,126 @@ def _pack_header(h: TableHeader) -> bytes:
     fixed = fixed.ljust(124, b"\0")
     crc = zlib.crc32(fixed + meta)
     return fixed + struct.pack("<I", crc) + meta
+
+
+class _Bad(Exception):
+    """A header problem: the field and the reason (turned into a TableFileError naming the file)."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field} {reason}")
+        self.field, self.reason = field, reason
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _check_scalars(
+    n_axes: int, block_rows: int, flags: int, tick_hz: float, discrete_mm: float, n_rows: int, n_blocks: int
+) -> None:
+    """Raise :class:`_Bad` for the first fixed-header field outside its bounds or inconsistent."""
+    if not 1 <= n_axes <= MAX_AXES:
+        raise _Bad("n_axes", f"= {n_axes}: a table has 1 to {MAX_AXES} axes")
+    if flags & ~FLAG_FINE:
+        raise _Bad("flags", f"= {flags:#x}: unknown flag bits (only bit 0, the fine channel, is defined)")
+    if not 1 <= block_rows <= MAX_BLOCK_ROWS:
+        raise _Bad("block_rows", f"= {block_rows}: must be 1 to {MAX_BLOCK_ROWS}")
+    lo, hi = TICK_HZ_RANGE
+    if not (math.isfinite(tick_hz) and lo <= tick_hz <= hi):
+        raise _Bad("tick_hz", f"= {tick_hz!r}: must be a finite tick rate from {lo:g} to {hi:g} Hz")
+    lo, hi = DISCRETE_MM_RANGE
+    if not (math.isfinite(discrete_mm) and lo <= discrete_mm <= hi):
+        raise _Bad("discrete_mm", f"= {discrete_mm!r}: must be a finite step from {lo:g} to {hi:g} mm")
+    if n_rows < 1:
+        raise _Bad("n_rows", f"= {n_rows}: a table has at least one row")
+    if n_blocks != -(-n_rows // block_rows):
+        raise _Bad("n_blocks", f"= {n_blocks}: must be ceil(n_rows / block_rows) = {-(-n_rows // block_rows)}")
+
+
+def _check_meta(meta: object, n_axes: int) -> None:
+    """Raise :class:`_Bad` for metadata that is not an object, axes that are not ``n_axes`` well-formed,
+    unique names, or a known key holding a value of the wrong kind."""
+    if not isinstance(meta, dict):
+        raise _Bad("metadata", f"must be a JSON object, not {type(meta).__name__}")
+    axes = meta.get("axes")
+    if not isinstance(axes, list) or not all(isinstance(a, str) for a in axes):
+        raise _Bad("axes", f"= {axes!r}: must be a list of axis names")
+    if len(axes) != n_axes:
+        raise _Bad("axes", f"= {axes!r}: {len(axes)} names for n_axes = {n_axes} columns")
+    bad = [a for a in axes if not AXIS_NAME.fullmatch(a)]
+    if bad:
+        raise _Bad("axes", f"= {axes!r}: {bad[0]!r} is not an axis name (a letter, then letters, digits or _)")
+    if len(set(axes)) != len(axes):
+        raise _Bad("axes", f"= {axes!r}: names repeat")
+    start = meta.get("start_mm")
+    if start is not None and not (
+        isinstance(start, list) and len(start) == n_axes and all(_is_number(v) and math.isfinite(v) for v in start)
+    ):
+        raise _Bad("start_mm", f"= {start!r}: must be a list of {n_axes} finite positions (mm), one per axis")
+    for key in _META_TEXT:
+        if not isinstance(meta.get(key), (str, type(None))):
+            raise _Bad(key, f"= {meta[key]!r}: must be a string")
+    for key in _META_COUNT:
+        v = meta.get(key)
+        if v is not None and not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+            raise _Bad(key, f"= {v!r}: must be a count (an integer >= 0)")
+    for key in (*_META_NONNEG, *_META_POSITIVE):
+        v = meta.get(key)
+        floor_ok = key in _META_NONNEG and v == 0
+        if v is not None and not (_is_number(v) and math.isfinite(v) and (v > 0 or floor_ok)):
+            sign = "positive" if key in _META_POSITIVE else "non-negative"
+            raise _Bad(key, f"= {v!r}: must be a finite {sign} number")
+
+
+def _parse_meta(raw: bytes) -> tuple[object, bool]:
+    """The metadata JSON and whether it holds NaN, Infinity or a number that overflows to them."""
+    seen: list[str] = []
+
+    def constant(name: str) -> float:
+        seen.append(name)
+        return float(name)
+
+    def number(text: str) -> float:
+        v = float(text)
+        if not math.isfinite(v):
+            seen.append(text)
+        return v
+
+    return json.loads(raw.decode("utf-8"), parse_constant=constant, parse_float=number), bool(seen)
+
+
+def check_events(events: np.ndarray, n_rows: int) -> str | None:
+    """Why the event records are malformed, or ``None``: ticks within ``0 .. n_rows-1`` and sorted, kinds
+    known, values finite; laser records with a mode of 0, 3 or 4 and a power >= 0, shutter records 0 or 1,
+    coolant records 7, 8 or 9, dwells and block rows >= 0. ``events``: ``(n,)`` of ``EVENT_DTYPE``."""
+    if events.size == 0:
+        return None
+    tick, kind, aux, value = events["tick"], events["kind"], events["aux"], events["value"]
+
+    def first(mask: np.ndarray, why: str) -> str | None:
+        if not mask.any():
+            return None
+        i = int(np.argmax(mask))
+        name = EventKind.NAMES.get(int(kind[i]), str(int(kind[i])))
+        return f"event {i} ({name} at tick {int(tick[i])}): {why.format(aux=int(aux[i]), value=float(value[i]))}"
+
+    known = np.isin(kind, np.array(list(EventKind.NAMES), np.uint32))
+    laser, shutter, coolant = kind == EventKind.LASER, kind == EventKind.SHUTTER, kind == EventKind.COOLANT
+    checks = [
+        ((tick < 0) | (tick >= n_rows), f"tick outside the table's rows 0-{n_rows - 1}"),
+        (np.r_[False, tick[1:] < tick[:-1]], "event records are not sorted by tick"),
+        (~known, "unknown kind"),
+        (~np.isfinite(value), "value {value!r} is not finite"),
+        (laser & ~np.isin(aux, (0, 3, 4)), "laser mode {aux} (expected 0, 3 or 4)"),
+        (laser & ~(value >= 0), "laser power {value!r} < 0"),
+        (shutter & (aux > 1), "shutter state {aux} (expected 0 or 1)"),
+        (coolant & ~np.isin(aux, (7, 8, 9)), "coolant code {aux} (expected 7, 8 or 9)"),
+        (np.isin(kind, (EventKind.DWELL, EventKind.BLOCK)) & ~(value >= 0), "value {value!r} < 0"),
+    ]
+    for mask, why in checks:
+        if (msg := first(mask, why)) is not None:
+            return msg
+    return None
 
 
 class TableWriter:
@@ -160,16 +296,20 @@ class TableWriter:
         fine: bool = True,
         block_rows: int = DEFAULT_BLOCK_ROWS,
     ):
-        if n_rows < 1:
-            raise ValueError("a table has at least one row")
-        self.path = Path(path)
-        self.tmp = self.path.with_name(self.path.name + ".part")
         n_axes = len(axes)
-        n_blocks = -(-n_rows // block_rows)
+        n_blocks = -(-n_rows // block_rows) if block_rows > 0 else 0
         meta = dict(meta or {})
         meta["axes"] = list(axes)
+        try:  # never write a header that a reader refuses
+            _check_scalars(n_axes, block_rows, FLAG_FINE if fine else 0, float(tick_hz), float(discrete_mm), n_rows,
+                           n_blocks)  # fmt: skip
+            _check_meta(meta, n_axes)
+        except _Bad as bad:
+            raise ValueError(f"table header field {bad}") from None
+        self.path = Path(path)
+        self.tmp = self.path.with_name(self.path.name + ".part")
         flags = FLAG_FINE if fine else 0
-        head_len = HEADER_SIZE + len(json.dumps(meta, sort_keys=True).encode("utf-8"))
+        head_len = HEADER_SIZE + len(json.dumps(meta, sort_keys=True, allow_nan=False).encode("utf-8"))
         crc_len = 4 * n_blocks * (2 if fine else 1)
         data_offset = _align(head_len + crc_len)
         events_offset = data_offset + n_blocks * block_rows * n_axes * 4 * (2 if fine else 1)
@@ -246,9 +386,12 @@ class TableWriter:
         if self._rows != h.n_rows:
             self.abort()
             raise ValueError(f"table announced {h.n_rows} rows but {self._rows} were written")
+        ev = np.ascontiguousarray(self.events, dtype=EVENT_DTYPE)
+        if (why := check_events(ev, h.n_rows)) is not None:
+            self.abort()
+            raise ValueError(f"malformed events: {why}")
         if self._fill:
             self._flush_block()
-        ev = np.ascontiguousarray(self.events, dtype=EVENT_DTYPE)
         ev_bytes = ev.tobytes()
         self.header = h = TableHeader(**{**h.__dict__, "n_events": int(ev.size), "events_crc": zlib.crc32(ev_bytes)})
         self._f.seek(h.events_offset)
@@ -269,11 +412,14 @@ class TableWriter:
 
 
 class TableFile:
-    """A table file opened for reading: memory-mapped, verified before use.
+    """A table file opened for reading: memory-mapped, validated and verified before use.
 
-    ``TableFile(path)`` checks the header, the sizes and (unless ``verify=False``) every block's
-    CRC and the events' CRC, raising :class:`~jaxcnc.errors.TableFileError` naming the file and
-    the damaged part — before anything moves.
+    ``TableFile(path)`` checks the header — magic, version, CRC, every field finite, consistent and within
+    its bounds, the metadata (``axes``: ``n_axes`` well-formed unique names), the layout against the file's
+    size, the zero padding — and the event records (ticks in range and sorted, kinds known, values finite);
+    unless ``verify=False`` also every block's CRC, the events' CRC and the last block's padding rows. It
+    raises :class:`~jaxcnc.errors.TableFileError` naming the file and the field or part at fault — before
+    anything moves. ``docs/table-format.md`` lists every rule.
     """
 
     def __init__(self, path: str | Path, verify: bool = True):
@@ -289,6 +435,8 @@ class TableFile:
                 if vals[1] != VERSION:
                     raise self._err(f"table format version {vals[1]} is not supported (this reader: {VERSION})")
                 json_bytes = vals[9]
+                if json_bytes > MAX_JSON_BYTES:
+                    raise self._err(f"header field json_bytes = {json_bytes}: more than {MAX_JSON_BYTES} bytes")
                 if HEADER_SIZE + json_bytes > size:
                     raise self._err("truncated header")
                 meta_raw = f.read(json_bytes)
@@ -297,23 +445,41 @@ class TableFile:
         (crc_stored,) = struct.unpack_from("<I", fixed, 124)
         if zlib.crc32(fixed[:124] + meta_raw) != crc_stored:
             raise self._err("header checksum mismatch (damaged header)")
+        if fixed[_HEADER.size : 124].strip(b"\0"):
+            raise self._err(f"reserved header bytes {_HEADER.size}-123 are not zero")
         try:
-            meta = json.loads(meta_raw.decode("utf-8"))
-        except ValueError:
-            raise self._err("header metadata is not valid JSON") from None
+            meta, non_finite = _parse_meta(meta_raw)
+        except (ValueError, RecursionError) as exc:
+            raise self._err(f"header metadata is not valid JSON ({exc})") from None
         f = dict(zip(_FIELDS, vals, strict=True))
+        try:
+            _check_scalars(*(f[k] for k in ("n_axes", "block_rows", "flags", "tick_hz", "discrete_mm", "n_rows")),
+                           f["n_blocks"])  # fmt: skip
+            _check_meta(meta, f["n_axes"])
+        except _Bad as bad:
+            field = bad.field if bad.field == "metadata" else f"field {bad.field}"
+            raise self._err(f"header {field} {bad.reason}") from None
+        if non_finite:
+            raise self._err("header metadata holds NaN or Infinity (not a number a table may carry)")
         self.header = h = TableHeader(**{k: f[k] for k in _HEADER_KEYS}, meta=meta)
         n_axes, n_blocks, n_events, events_offset = h.n_axes, h.n_blocks, h.n_events, h.events_offset
-        if (
-            n_axes < 1
-            or h.block_rows < 1
-            or n_blocks != -(-h.n_rows // h.block_rows)
-            or min(h.tick_hz, h.discrete_mm) <= 0
-        ):
-            raise self._err("inconsistent header fields")
+        n_ch = 2 if h.has_fine else 1
+        want_data = _align(HEADER_SIZE + json_bytes + 4 * n_ch * n_blocks)
+        if h.data_offset != want_data:
+            raise self._err(
+                f"header field data_offset = {h.data_offset}: the layout puts the data at {want_data} "
+                "(the first multiple of 4096 after the header, the metadata and the CRC table)"
+            )
+        want_events = h.data_offset + n_ch * n_blocks * h.block_bytes
+        if events_offset != want_events:
+            raise self._err(f"header field events_offset = {events_offset}: the data ends at {want_events}")
         expected = events_offset + n_events * EVENT_DTYPE.itemsize
         if size != expected:
             raise self._err(f"file is {size} bytes, header says {expected} (truncated or extended)")
+        with open(self.path, "rb") as fh:
+            pad = os.pread(fh.fileno(), h.crc_offset - HEADER_SIZE - json_bytes, HEADER_SIZE + json_bytes)
+        if pad.strip(b"\0"):
+            raise self._err("the padding between the metadata and the CRC table is not zero (malformed padding)")
         rows = n_blocks * h.block_rows
         self._pos = np.memmap(self.path, dtype="<i4", mode="r", offset=h.data_offset, shape=(rows, n_axes))
         self._fine = (
@@ -321,19 +487,34 @@ class TableFile:
             if h.has_fine
             else None
         )
-        n_ch = 2 if h.has_fine else 1
         self._crc = np.fromfile(self.path, dtype="<u4", count=n_ch * n_blocks, offset=h.crc_offset).reshape(
             n_ch, n_blocks
         )
         self.events = np.fromfile(self.path, dtype=EVENT_DTYPE, count=n_events, offset=events_offset)
         if verify:
             self.verify()
+        if (why := check_events(self.events, h.n_rows)) is not None:
+            raise self._err(f"malformed events: {why}")
 
     def _err(self, reason: str) -> TableFileError:
         return TableFileError(f"{self.path}: {reason}")
 
+    def require_axes(self, axes: list[str] | tuple[str, ...], owner: str) -> None:
+        """Refuse (:class:`~jaxcnc.errors.TableFileError`, naming both lists) unless the table's axes are
+        ``axes``, in order. ``owner`` says whose axes they are (e.g. ``"machine 'laser'"``).
+
+        Sinks send a table's columns by position, so a table with two columns swapped and relabelled would
+        drive one axis with another's motion even though each column, measured by its name, holds its limits.
+        """
+        if self.header.axes != list(axes):
+            raise self._err(
+                f"the table's axes {self.header.axes} differ from {owner} axes {list(axes)} "
+                "(columns are sent to the drives by position)"
+            )
+
     def verify(self) -> None:
-        """Check every block's CRC and the events' CRC; raise on the first damage found.
+        """Check every block's CRC, the last block's padding rows and the events' CRC; raise on the first
+        damage found.
 
         Blocks are read with ``pread`` (not through the memory map), so verifying a table of any
         size keeps only one block in memory.
@@ -352,6 +533,15 @@ class TableFile:
                     last = min(first + h.block_rows, h.n_rows) - 1
                     what = "position" if ch == 0 else "fine"
                     raise self._err(f"{what} block {b} (ticks {first}-{last}) fails its checksum (damaged data)")
+                # the last block is padded by repeating the final row: the machine stands still after it
+                tail = h.n_rows - (h.n_blocks - 1) * h.block_rows
+                last = np.frombuffer(data, dtype="<i4").reshape(h.block_rows, h.n_axes)
+                if np.any(last[tail:] != last[tail - 1]):
+                    what = "position" if ch == 0 else "fine"
+                    raise self._err(
+                        f"{what} block {h.n_blocks - 1}: the padding rows after tick {h.n_rows - 1} do not repeat "
+                        "the final row (malformed padding)"
+                    )
         if zlib.crc32(self.events.tobytes()) != h.events_crc:
             raise self._err("event records fail their checksum (damaged events)")
 

@@ -36,7 +36,7 @@ class Violation:
     first_tick: int
     last_tick: int
     axis: str
-    quantity: str  # "v", "a", "j", "pos", "path", "table" or "pulse" (the last two: ``axis`` holds the text)
+    quantity: str  # "v", "a", "j", "pos", "start", "path", "table" or "pulse" (the last two: ``axis`` holds the text)
     value: float  # the worst value in the run
     limit: float
 
@@ -45,6 +45,11 @@ class Violation:
             return f"table: {self.axis}"
         if self.quantity == "pulse":
             return f"tick {self.first_tick}: {self.axis}"
+        if self.quantity == "start":
+            return (
+                f"tick 0 axis {self.axis}: the first row is at {self.value:.6g} mm but the job starts at "
+                f"{self.limit:.6g} mm (a jump into the first row)"
+            )
         span = f"tick {self.first_tick}" + (f" (to {self.last_tick})" if self.last_tick != self.first_tick else "")
         if self.quantity == "path":  # ``axis`` names the program line (jaxcnc.ticks.deviation)
             return f"{span} {self.axis}: distance from the programmed path {self.value:.6g} mm > {self.limit:.6g} mm"
@@ -139,11 +144,41 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1, strict=False))
 
 
+def require_machine_axes(table: TableFile, machine: MachineConfig) -> None:
+    """Refuse (:class:`~jaxcnc.errors.TableFileError`) a table whose axes are not the machine's, in order
+    (:meth:`TableFile.require_axes`: sinks send columns by position)."""
+    table.require_axes(machine.axis_names, f"machine {machine.name!r}")
+
+
+def job_start_mm(table: TableFile, machine: MachineConfig | None) -> np.ndarray | None:
+    """Where the job starts, per column (mm): the header's ``start_mm`` when it records one, otherwise the
+    machine's home of each axis (where every job starts, :func:`jaxcnc.planners.program_start`); ``None``
+    without either."""
+    start = table.header.meta.get("start_mm")
+    if start is not None:
+        return np.asarray(start, np.float64)
+    if machine is None:
+        return None
+    return np.array([machine.axis(a).home for a in table.header.axes], np.float64)
+
+
+def _fixed_point(x_mm: np.ndarray, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """Positions in mm as (discretes, fine residual in 2^-32 discretes), int64 each, discretes clipped to int32."""
+    u = np.clip(np.asarray(x_mm, np.float64) / q, -(2.0**31), 2.0**31 - 1)
+    pos = np.round(u)
+    return pos.astype(np.int64), np.round((u - pos) * FINE_SCALE).astype(np.int64)
+
+
 def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_rows: int = 1 << 16) -> Measurement:
     """Measure a table's per-axis |v|, |a|, |j| and travel; check them against ``machine``.
 
     Differences at row ``k`` use rows ``k-3..k`` (jerk), ``k-2..k`` (acceleration) and
-    ``k-1..k`` (speed), with the first row repeated before the table and the last row after it.
+    ``k-1..k`` (speed). The machine stands at rest at the job's start before the table (:func:`job_start_mm`:
+    the header's ``start_mm`` or the machine's home; without either, at the first row) and at rest at the last
+    row after it, so a table that starts or ends moving, or whose first row is not the start (a jump into the
+    first row), fails like any other motion — and a first row more than half a discrete from the start is a
+    ``start`` violation of its own. With a machine the table's axes must be the machine's, in order
+    (:func:`require_machine_axes`, else :class:`~jaxcnc.errors.TableFileError`).
     The table is read ``chunk_rows`` rows at a time (plus a 3-row overlap); the results do not
     depend on ``chunk_rows``. A travel violation names the first tick holding the axis' extreme.
     """
@@ -153,6 +188,7 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
     f, q = h.tick_hz, h.discrete_mm
     limits = {}
     if machine is not None:
+        require_machine_axes(table, machine)
         if not h.has_fine:
             meas.violations.append(
                 Violation(
@@ -177,14 +213,19 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
                 )
             )
         for a in axes:
-            if a not in machine.axis_names:
-                meas.violations.append(Violation(0, 0, f"axis {a!r} is not on machine {machine.name!r}", "table", 0, 0))
-                continue
             ax = machine.axis(a)
             limits[a] = {"v": ax.v_max, "a": ax.a_max, "j": ax.j_max}
-        missing = [a for a in machine.axis_names if a not in axes]
-        if missing:
-            meas.violations.append(Violation(0, 0, f"table lacks machine axes {missing}", "table", 0, 0))
+    start_mm = job_start_mm(table, machine)
+    with TableRows(table) as rows:
+        row0 = rows.exact_mm(0, 1)[0]
+    if start_mm is None:
+        start_mm = row0
+    for i, a in enumerate(axes):
+        if abs(row0[i] - start_mm[i]) > 0.5 * q * (1 + 1e-9):
+            meas.violations.append(Violation(0, 0, a, "start", float(row0[i]), float(start_mm[i])))
+    start_pos, start_fine = _fixed_point(start_mm, q)
+    if not h.has_fine:  # the table's rows are whole discretes: so is the start it rests at
+        start_fine = np.zeros_like(start_fine)
     # Scale from k-th integer difference (in 2^-32 discretes) to mm/s^k.
     scale = {name: q / FINE_SCALE * f ** (i + 1) for i, name in enumerate(_QUANTITIES)}
     # Noise of the fine channel's rounding (half a unit per row) in the k-th difference.
@@ -206,13 +247,16 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
             raw, raw_fine = rows.read(first, int(idx[-1]) + 1)
             pos = raw.astype(np.int64)[idx - first]
             fine = raw_fine.astype(np.int64)[idx - first] if raw_fine is not None else np.zeros_like(pos)
+            before = np.arange(start - 3, stop) < 0  # the machine at rest at the job's start before row 0
+            pos[before], fine[before] = start_pos, start_fine
             # rows seen again (the 3-row overlap) hold no new extreme, so the strict test keeps the first tick
             c_lo, c_hi = raw.min(axis=0), raw.max(axis=0)
             lower, higher = c_lo < lo_val, c_hi > hi_val
             lo_tick = np.where(lower, first + raw.argmin(axis=0), lo_tick)
             hi_tick = np.where(higher, first + raw.argmax(axis=0), hi_tick)
             lo_val, hi_val = np.where(lower, c_lo, lo_val), np.where(higher, c_hi, hi_val)
-            d = np.diff(pos, axis=0) * np.int64(2**32) + np.diff(fine, axis=0)  # exact int64
+            # exact int64; a step of more than 2^28 discretes in a tick (absurd) is clipped so nothing overflows
+            d = np.clip(np.diff(pos, axis=0), -(2**28), 2**28) * np.int64(2**32) + np.diff(fine, axis=0)
             diffs = {"v": d[2:], "a": np.diff(d, axis=0)[1:], "j": np.diff(d, n=2, axis=0)}
             for name, dd in diffs.items():
                 val = np.abs(dd).astype(np.float64) * scale[name]  # row k = start + i
@@ -238,8 +282,6 @@ def measure_table(table: TableFile, machine: MachineConfig | None = None, chunk_
             meas.violations.append(Violation(min(r0, n - 1), min(r1, n - 1), a, name, v, limits[a][name]))
     if machine is not None:
         for i, a in enumerate(axes):
-            if a not in machine.axis_names:
-                continue
             ax = machine.axis(a)
             if pmin[i] < ax.min - q / 2:
                 t = int(lo_tick[i])
