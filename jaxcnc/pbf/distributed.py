@@ -1,0 +1,69 @@
+"""Builds on Dask (dask.distributed): chunks of layers as tasks, results recorded as they come.
+
+By default the build starts a local cluster in this process with one single-threaded worker process per core
+(the work is NumPy and Clipper; processes avoid the GIL); ``scheduler="tcp://HOST:PORT"`` uses a running cluster
+instead, whose workers must see the output folder at the same path (a shared file system).
+
+Each task computes its layers and writes their files itself (atomically), then returns their records; the driver
+adds a record to the manifest only when its task's result arrives. A worker that dies mid-task loses nothing
+that was recorded: the scheduler runs its unfinished tasks again on the workers left (up to Dask's
+``distributed.scheduler.allowed-failures`` times), and a file it was writing is left under a temporary name that
+no one reads and the driver removes. Each layer is a pure function of the mesh, the parameters and its index, so
+a layer computed twice is the same file.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Callable
+
+import numpy as np
+
+from jaxcnc.pbf.params import BuildParams
+
+
+def local_cluster(workers: int | None = None):
+    """A local cluster of ``workers`` (default: one per core) single-threaded worker processes, no dashboard."""
+    from dask.distributed import LocalCluster
+
+    n = workers or os.cpu_count() or 1
+    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
+
+
+def run_on_dask(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    z_all_mm: np.ndarray,
+    jobs: list[list[int]],
+    params: BuildParams,
+    out: str,
+    record: Callable[[list[dict]], None],
+    workers: int | None = None,
+    scheduler: str | None = None,
+) -> None:
+    """Run :func:`jaxcnc.pbf.build.run_chunk` for every job; call ``record`` with each job's records as it ends."""
+    from dask.distributed import Client, as_completed
+
+    from jaxcnc.pbf.build import run_chunk
+
+    cluster = None
+    if scheduler is None:
+        cluster = local_cluster(workers)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        run = uuid.uuid4().hex[:8]
+        v, f, z = client.scatter([vertices, faces, z_all_mm], broadcast=True)
+        futures = [
+            client.submit(run_chunk, v, f, z, job, params, out, key=f"pbf-layers-{job[0]}-{job[-1]}-{run}")
+            for job in jobs
+        ]
+        for fut in as_completed(futures):
+            record(fut.result())
+            fut.release()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
