@@ -77,6 +77,7 @@ class Registry(Generic[T]):
         self._adapt = adapt or (lambda obj: obj)
         self._items: dict[str, T] = {}
         self._lazy: dict[str, str] = {}  # built-ins by "module:attribute", imported on first lookup
+        self._origins: dict[str, str] = {}  # loaded plug-ins: where each came from
         self._entry_points: dict[str, EntryPoint] | None = None  # found on first need
 
     def register(self, name: str, item: Any = None):
@@ -110,7 +111,21 @@ class Registry(Generic[T]):
         if ep is None:
             raise self.error(f"unknown {self.what} {name!r}; known: {', '.join(self.names())}")
         self._items[name] = self._load(ep)
+        self._origins[name] = _where(ep)
         return self._items[name]
+
+    def origin(self, name: str) -> str | None:
+        """Where the plug-in ``name`` came from (its entry point and distribution), ``None`` for a built-in
+        or one registered in code. Callers name it when third-party code fails at run time."""
+        return self._origins.get(name)
+
+    def failed(self, name: str, exc: BaseException) -> JaxcncError | None:
+        """The one-line error for plug-in ``name`` having raised ``exc`` while it ran, or ``None`` when
+        ``name`` is not an entry-point plug-in (a built-in's failure is a bug to report with its traceback)."""
+        where = self.origin(name)
+        if where is None or isinstance(exc, JaxcncError):
+            return None
+        return self.error(f"{self.what} plug-in {name!r} ({where}) failed: {_cause(exc)}")
 
     def names(self) -> list[str]:
         """Every name that :meth:`get` knows, built-in or from an entry point (none is loaded)."""
@@ -134,12 +149,19 @@ class Registry(Generic[T]):
         self._entry_points = None
 
     def _load(self, ep: EntryPoint) -> T:
-        dist = getattr(getattr(ep, "dist", None), "name", None)
-        where = f"{ep.value}" + (f" from distribution {dist!r}" if dist else "")
         try:
             return self._adapt(ep.load())
         except Exception as exc:  # any failure of third-party code: one line naming the plug-in
-            cause = f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__
             raise self.error(
-                f"{self.what} plug-in {ep.name!r} ({where}, entry-point group {self.group}) failed to load: {cause}"
+                f"{self.what} plug-in {ep.name!r} ({_where(ep)}, entry-point group {self.group}) failed to load: "
+                f"{_cause(exc)}"
             ) from None
+
+
+def _where(ep: EntryPoint) -> str:
+    dist = getattr(getattr(ep, "dist", None), "name", None)
+    return f"{ep.value}" + (f" from distribution {dist!r}" if dist else "")
+
+
+def _cause(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}".splitlines()[0] if str(exc) else type(exc).__name__

@@ -15,7 +15,7 @@ from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
 from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, request_limits
-from jaxcnc.planners.registry import DEFAULT_PLANNER, resolve_planner
+from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
 from jaxcnc.planners.smoothing import jerk_limited
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 
@@ -119,10 +119,16 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     stop = program.stop_before[rows] & first_of_block
     v_max, a_max, j_max = request_limits(machine)  # the machine's limits less the margin, applied here once
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)
-    if np.any(np.isfinite(j_max)) and not chosen.handles_jerk:
-        plan = jerk_limited(request, chosen)  # jerk limits: the planner's time law averaged (an S-curve)
-    else:
-        plan = chosen.plan(request)
+    try:
+        if np.any(np.isfinite(j_max)) and not chosen.handles_jerk:
+            plan = jerk_limited(request, chosen)  # jerk limits: the planner's time law averaged (an S-curve)
+        else:
+            plan = chosen.plan(request)
+    except Exception as exc:
+        one_line = PLANNERS.failed(name, exc)  # a plug-in's failure: one line naming it
+        if one_line is None:
+            raise
+        raise one_line from None
     return PlannedJob(
         program=program,
         spans=spans,
