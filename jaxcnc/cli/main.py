@@ -321,6 +321,45 @@ def cmd_expand(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_build(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from jaxcnc.pbf.build import build
+    from jaxcnc.pbf.params import load_params
+
+    params = load_params(args.machine)
+    if args.repair:
+        params = replace(params, repair=True)
+    bar = None if args.quiet else _progress_bar(desc="layers", unit="layer", total=0, leave=False)
+
+    def progress(done: int, total: int) -> None:
+        if bar is not None and hasattr(bar, "total"):
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+
+    try:
+        res = build(args.input, params, args.output, workers=args.workers, scheduler=args.scheduler,
+                    chunk=args.chunk, cli=args.cli, pictures=args.pictures, progress=progress)  # fmt: skip
+    finally:
+        if bar is not None:
+            bar.close()
+    if not args.quiet:
+        rep = res.mesh_report
+        h, m = divmod(round(res.time_estimate_s / 60), 60)
+        print(f"{args.input}: {rep.faces} faces, {rep.shells} shell(s); {rep.summary()}")
+        for what in rep.repaired:
+            print(f"  repaired: {what}")
+        print(f"{res.layers} layers of {params.layer_thickness_mm} mm in {res.out_dir}: {res.computed} computed, "
+              f"{res.skipped} already done (checksums hold); hatch {res.hatch_mm / 1000:.1f} m")  # fmt: skip
+        print(f"estimated build time: {h} h {m:02d} min ({res.time_estimate_s:.0f} s, recoating included)")
+        if res.cli_file:
+            print(f"CLI ({args.cli}): {res.cli_file}")
+        if res.pictures:
+            print(f"pictures: {len(res.pictures)} in {res.pictures[0].parent}")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     # each suite imports what it measures: 'bench player' runs in a player-only install
     results: dict = {}
@@ -351,6 +390,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.pulsed import run_pulsed_benchmarks
 
         results["pulsed"] = run_pulsed_benchmarks(programs=args.programs, check=args.check)
+    if args.suite in ("all", "pbf"):
+        from jaxcnc.bench.pbf import run_pbf_benchmarks
+
+        results["pbf"] = run_pbf_benchmarks(stl=args.stl)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
@@ -530,10 +573,36 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed"),
+        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed", "pbf"),
         help="which benchmarks (default: %(default)s)",
     )
+    sp.add_argument("--stl", help="pbf: the part (default: the corpus's frameGuide.stl)")
     sp.set_defaults(func=cmd_bench)
+
+    sp = sub.add_parser(
+        "build",
+        help="powder-bed fusion: slice, contour and hatch a mesh into one vector file per layer",
+        description="Build INPUT (STL, OBJ, 3MF, PLY, OFF) with the build parameters of --machine (a TOML file "
+        "with a [pbf] table, docs/pbf.md): mesh checked (holes, duplicate, degenerate faces, isolated shells, "
+        "normals: refused with exit 2, or repaired with --repair), placed on the plate, sliced, contoured, its "
+        "thin walls and skins found, hatched; one vector file per layer and a manifest with checksums in OUTPUT "
+        "(a rerun skips layers already done), build.cli, layer pictures and a build-time estimate. Layers are "
+        "computed on a local Dask cluster with one worker per core (--workers N, 0: in this process) or on the "
+        "cluster of --scheduler.",
+    )
+    sp.add_argument("input", help="the part: a mesh file")
+    sp.add_argument("--machine", "-m", required=True, help="build parameters (TOML with [pbf])")
+    sp.add_argument("--output", "-o", required=True, help="output folder")
+    sp.add_argument("--workers", type=int, help="local Dask workers (default: one per core; 0: no Dask)")
+    sp.add_argument("--scheduler", help="tcp://HOST:PORT of a running Dask scheduler (workers must see OUTPUT)")
+    sp.add_argument("--chunk", type=int, default=4, help="layers per task (default: %(default)s)")
+    sp.add_argument(
+        "--cli", choices=("binary", "ascii", "none"), default="binary", help="CLI export (default: %(default)s)"
+    )
+    sp.add_argument("--pictures", type=int, default=4, help="layers to draw (default: %(default)s; -1: all)")
+    sp.add_argument("--repair", action="store_true", help="repair mesh defects instead of refusing the mesh")
+    sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
+    sp.set_defaults(func=cmd_build, needs=("trimesh", "pyclipper", "dask", "matplotlib"))
     return p
 
 
