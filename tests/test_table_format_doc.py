@@ -57,3 +57,19 @@ def test_doc_snippet_reads_positions(tmp_path):
     scope: dict = {}
     exec(code, scope)  # noqa: S102 - the documented snippet, run as a firmware writer would
     np.testing.assert_array_equal(scope["pos"], table.positions)
+
+
+def test_documented_bounds_are_the_readers_and_plans_record_their_start(tmp_path):
+    """The validation table states the reader's bounds; a planned table records where its job starts."""
+    from jaxcnc.format import tablefile as tf
+
+    doc = DOC.read_text()
+    assert f"| `n_axes` | 1 to {tf.MAX_AXES} |" in doc
+    assert f"| `block_rows` | 1 to {tf.MAX_BLOCK_ROWS:,} (2²⁰) |" in doc
+    assert tf.TICK_HZ_RANGE == (1.0, 1e6) and "| `tick_hz` | finite, 1 Hz to 1 MHz |" in doc
+    assert tf.DISCRETE_MM_RANGE == (1e-9, 0.1) and "| `discrete_mm` | finite, 1e-9 to 0.1 mm |" in doc
+    assert tf.MAX_JSON_BYTES == 1 << 20 and "at most 1 MiB" in doc
+    machine = make_machine()
+    _, table, meas = table_of("G1 X5 Y3 F600\n", machine, tmp_path)
+    assert table.header.meta["start_mm"] == [machine.axis(a).home for a in machine.axis_names]
+    assert meas.ok and table.exact_mm(0, 1)[0].tolist() == table.header.meta["start_mm"]

@@ -19,7 +19,7 @@ from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.pso import pso_events
-from jaxcnc.ticks.sample import Sampler, TickSampler, quantize
+from jaxcnc.ticks.sample import Sampler, TickSampler, machine_axes, quantize
 
 _EVENT_OF = {
     Event.PROGRAM_STOP: EventKind.PROGRAM_STOP,
@@ -109,9 +109,21 @@ def write_samples(
     return Path(path)
 
 
-def table_meta(machine: MachineConfig, source: str, planner: str, total_time_s: float, **more) -> dict:
-    """The header metadata every table carries: machine, source (with checksums), generator."""
+def table_meta(
+    machine: MachineConfig,
+    source: str,
+    planner: str,
+    total_time_s: float,
+    start_mm: np.ndarray | list[float] | None = None,
+    **more,
+) -> dict:
+    """The header metadata every table carries: machine, source (with checksums), generator, and where the
+    job starts (``start_mm``, per machine axis; default: each axis' home, where every job starts) — ``check``
+    compares the first row with it (``docs/table-format.md``)."""
+    if start_mm is None:
+        start_mm = [machine.axis(a).home for a in machine.axis_names]
     return {
+        "start_mm": [float(v) for v in start_mm],
         "machine": machine.name,
         "machine_file": machine.source,
         "machine_sha256": file_sha256(machine.source),
@@ -131,5 +143,12 @@ def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = No
     records (default: the planner that planned ``job``).
     """
     planner = planner or job.planner
-    meta = table_meta(job.machine, job.program.file, planner, job.plan.total_time_s, n_blocks=job.program.n_blocks)
+    m = job.machine
+    start = None  # where the program starts (its first block), on the machine's axes; else the homes
+    if len(job.program):
+        home = np.array([m.axis(a).home for a in m.axis_names])
+        start = machine_axes(job.program.start[:1], np.asarray(job.axis_source), home)[0]
+    meta = table_meta(
+        m, job.program.file, planner, job.plan.total_time_s, start_mm=start, n_blocks=job.program.n_blocks
+    )
     return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress)
