@@ -125,6 +125,9 @@ def plan_program_file(
     dialect: str | None = None,
 ) -> dict:
     """Plan a contour program (G-code), write its table and verify it (limits, the path); the report."""
+    from jaxcnc.jaxconfig import configure_jax
+
+    configure_jax()  # float64 and the persistent compile cache
     from jaxcnc.format import TableFile
     from jaxcnc.planners import plan_job
     from jaxcnc.planners.job import machine_planner
@@ -179,6 +182,9 @@ def plan_points_file(
     reorder: bool = False,
 ) -> dict:
     """Plan a point-by-point pulsed job, write its table and verify it; the report (with the comparisons)."""
+    from jaxcnc.jaxconfig import configure_jax
+
+    configure_jax()  # float64 and the persistent compile cache
     from jaxcnc.format import TableFile
     from jaxcnc.planners.pulsed import DEFAULT_PULSE_PLANNER, plan_points
     from jaxcnc.planners.pulsed.reorder import serpentine_order
