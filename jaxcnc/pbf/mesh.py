@@ -135,14 +135,6 @@ def analyse(vertices: np.ndarray, faces: np.ndarray, file: str = "<mesh>") -> tu
     uniq, inv, cnt = np.unique(es, axis=0, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     boundary = cnt[inv] == 1
-    if boundary.any():
-        loops = _count_loops(uniq[cnt == 1])
-        mid = vertices[e[boundary]].mean(axis=1)[0]
-        report.defects.append(
-            Defect(
-                f"holes (open boundary: {int(boundary.sum())} edges in {loops} loops)", loops, tuple(map(float, mid))
-            )
-        )
     nonman = cnt[inv] > 2
     if nonman.any():
         mid = vertices[e[nonman]].mean(axis=1)[0]
@@ -165,6 +157,15 @@ def analyse(vertices: np.ndarray, faces: np.ndarray, file: str = "<mesh>") -> tu
     open_shell = np.zeros(n_shells, dtype=bool)
     np.logical_or.at(open_shell, labels[ef[boundary | nonman]], True)
     isolated_shell = (sizes < 4) | (open_shell & (np.arange(n_shells) != int(np.argmax(sizes))))
+    hole_edge = boundary & ~isolated_shell[labels[ef]]  # the edges of an isolated shell are that defect
+    if hole_edge.any():
+        loops = _count_loops(np.unique(es[hole_edge], axis=0))
+        mid = vertices[e[hole_edge]].mean(axis=1)[0]
+        report.defects.append(
+            Defect(
+                f"holes (open boundary: {int(hole_edge.sum())} edges in {loops} loops)", loops, tuple(map(float, mid))
+            )
+        )
     isolated = np.zeros(F, dtype=bool)
     isolated[good] = isolated_shell[labels]
     if isolated_shell.any():

@@ -45,8 +45,11 @@ class Slices:
 
 
 def layer_heights(z_top_mm: float, thickness_mm: float) -> np.ndarray:
-    """Mid-layer heights of a part from z = 0 to ``z_top_mm``: ``(k + 0.5) * thickness`` for k < ceil(top/t)."""
-    n = int(np.ceil(z_top_mm / thickness_mm - 1e-9))
+    """Mid-layer heights of a part from z = 0 to ``z_top_mm``: ``(k + 0.5) * thickness``, every one below the top.
+
+    A last partial layer thinner than half the thickness has no mid-height inside the part and is not built.
+    """
+    n = int(np.ceil(z_top_mm / thickness_mm - 0.5 - 1e-9))
     return (np.arange(max(n, 0)) + 0.5) * thickness_mm
 
 
