@@ -143,13 +143,13 @@ class Contour:
 
     @property
     def poly(self) -> np.ndarray:
-        """``(k, 2)`` the contour's polyline (consecutive duplicates removed)."""
-        pts = np.concatenate([p.poly for p in self.pieces])
+        """``(k, 2)`` the contour's polyline for the checks (a closed one without its closing point)."""
+        # each joint (within the chaining tolerance) is taken at the end of the piece before it
+        pts = np.concatenate([self.pieces[0].poly] + [p.poly[1:] for p in self.pieces[1:]])
+        if self.closed and pts.shape[0] > 2:
+            pts = pts[:-1]  # the ring closes itself at the first point
         keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > POLY_MERGE_MM])
-        pts = pts[keep]
-        if self.closed and pts.shape[0] > 1 and np.linalg.norm(pts[-1] - pts[0]) <= POLY_MERGE_MM:
-            pts = pts[:-1]  # the ring closes itself
-        return pts
+        return pts[keep]
 
 
 @dataclass(frozen=True, eq=False)

@@ -35,7 +35,7 @@ ANNOTATION = frozenset(
 MAX_NESTING = 16
 # What ezdxf (and the data it hands back) raises on a damaged file or entity.
 _READ_ERRORS = (OSError, UnicodeError, ValueError, KeyError, IndexError, TypeError, AttributeError, EOFError,
-                ZeroDivisionError, OverflowError, AssertionError, RecursionError)  # fmt: skip
+                ZeroDivisionError, OverflowError, AssertionError, RecursionError, StopIteration)  # fmt: skip
 
 
 def _dxf_errors() -> tuple[type[BaseException], ...]:
