@@ -104,8 +104,35 @@ class PointFileFrontEnd(FrontEnd):
         return read_points(path)
 
 
+class DxfFrontEnd(FrontEnd):
+    """DXF drawings (:mod:`jaxcnc.io.dxf`): contours chained, checked closed and non-crossing, cut inner first.
+
+    Options (:class:`~jaxcnc.io.drawing.DrawingOptions`): ``allow_open``, ``tol_mm``, ``feed_mm_s`` (default:
+    the machine's ``[path] feed``), ``power``, ``lead_in_mm``, ``layers``.
+    """
+
+    name = "DXF drawing"
+    produces = "program"
+    options = ("allow_open", "tol_mm", "feed_mm_s", "power", "lead_in_mm", "layers")
+
+    def load(self, path: Path, machine: MachineConfig, **options: Any) -> Program:
+        return self.drawing(path, machine, **options).program
+
+    def drawing(self, path: Path, machine: MachineConfig, **options: Any):
+        """The :class:`~jaxcnc.io.drawing.Drawing` (Program, contours, notes)."""
+        from jaxcnc.io.drawing import DrawingOptions
+        from jaxcnc.io.dxf import read_dxf
+        from jaxcnc.program import program_start
+
+        self.refuse_options(path, options)
+        given = {k: v for k, v in options.items() if v is not None}
+        return read_dxf(path, program_start(machine), DrawingOptions(**given))
+
+
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
 POINT_SUFFIXES = (".xyz", ".csv")
+DRAWING_SUFFIXES = (".dxf",)
+FRONT_ENDS.register("dxf", DxfFrontEnd)
 for _suffix in GCODE_SUFFIXES:
     FRONT_ENDS.register(_suffix[1:], GCodeFrontEnd)
 for _suffix in POINT_SUFFIXES:
@@ -130,8 +157,10 @@ def load_input(path: str | Path, machine: MachineConfig, **options: Any) -> Prog
 
 __all__ = [
     "FRONT_ENDS",
+    "DRAWING_SUFFIXES",
     "GCODE_SUFFIXES",
     "POINT_SUFFIXES",
+    "DxfFrontEnd",
     "FrontEnd",
     "GCodeFrontEnd",
     "PointFileFrontEnd",
