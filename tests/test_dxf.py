@@ -281,3 +281,24 @@ def test_corpus_drawing(name, tmp_path):
         assert np.any(d.program.kind == Kind.CURVE) or np.any(d.program.kind == Kind.LINE)
     assert plan_and_check(d, tmp_path) > 0
     assert math.isfinite(d.cut_length_mm)
+
+
+def test_cli_plans_checks_and_refuses(tmp_path, capsys):
+    from jaxcnc.cli.main import main
+
+    machine = tmp_path / "m.toml"
+    machine.write_text(machine_text(tick_hz=1000, v=200.0, a=2000.0, rapid=200.0))
+    doc = ezdxf.new(units=4)
+    msp = doc.modelspace()
+    square(msp, 0, 0, 40)
+    msp.add_circle((20, 20), 4)
+    part = save(doc, tmp_path, "part.dxf")
+    table = tmp_path / "part.ticks"
+    assert main(["plan", str(part), "-m", str(machine), "-o", str(table), "-q"]) == 0
+    assert main(["check", str(table), "-m", str(machine)]) == 0
+    assert "path: max deviation" in capsys.readouterr().out  # compared with the drawing, read again
+    square(msp, 30, 30, 40)
+    bad = save(doc, tmp_path, "bad.dxf")
+    assert main(["plan", str(bad), "-m", str(machine), "-o", str(tmp_path / "b.ticks"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"jaxcnc: error: {bad}:") and "contours cross or touch" in err and "\n" not in err
