@@ -129,10 +129,29 @@ class DxfFrontEnd(FrontEnd):
         return read_dxf(path, program_start(machine), DrawingOptions(**given))
 
 
+class HpglFrontEnd(DxfFrontEnd):
+    """HP-GL plot files (:mod:`jaxcnc.io.hpgl`): IN, SP, PU, PD, PA, PR in plotter units (40 per mm); the
+    contours checked and cut like a DXF drawing's (same options but ``layers``)."""
+
+    name = "HP-GL plot file"
+    options = ("allow_open", "tol_mm", "feed_mm_s", "power", "lead_in_mm")
+
+    def drawing(self, path: Path, machine: MachineConfig, **options: Any):
+        from jaxcnc.io.drawing import DrawingOptions
+        from jaxcnc.io.hpgl import read_hpgl
+        from jaxcnc.program import program_start
+
+        self.refuse_options(path, options)
+        given = {k: v for k, v in options.items() if v is not None}
+        return read_hpgl(path, program_start(machine), DrawingOptions(**given))
+
+
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
 POINT_SUFFIXES = (".xyz", ".csv")
-DRAWING_SUFFIXES = (".dxf",)
+DRAWING_SUFFIXES = (".dxf", ".plt", ".hpgl")
 FRONT_ENDS.register("dxf", DxfFrontEnd)
+FRONT_ENDS.register("plt", HpglFrontEnd)
+FRONT_ENDS.register("hpgl", HpglFrontEnd)
 for _suffix in GCODE_SUFFIXES:
     FRONT_ENDS.register(_suffix[1:], GCodeFrontEnd)
 for _suffix in POINT_SUFFIXES:
@@ -162,6 +181,7 @@ __all__ = [
     "POINT_SUFFIXES",
     "DxfFrontEnd",
     "FrontEnd",
+    "HpglFrontEnd",
     "GCodeFrontEnd",
     "PointFileFrontEnd",
     "front_end_for",
