@@ -14,6 +14,8 @@ and measures jaxcnc alone.
 from __future__ import annotations
 
 import importlib.util
+import statistics
+import time
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +69,53 @@ def pyslm_hatch_length_mm(layers: list) -> float:
     return total
 
 
+def dask_scaling(stl: Path, layers: int = 200, repeats: int = 3) -> dict:
+    """A ``layers``-layer build of ``stl`` on a local cluster of 1 and of 2 worker processes (clusters started
+    beforehand, not timed), each build into a fresh folder; the files of both are compared byte for byte."""
+    import shutil
+    import tempfile
+
+    from jaxcnc.pbf.build import build
+    from jaxcnc.pbf.distributed import local_cluster
+    from jaxcnc.pbf.mesh import prepare
+    from jaxcnc.pbf.params import default_params
+
+    mesh = prepare(stl)
+    height = float(mesh.bounds_mm[1, 2])
+    params = default_params(layer_thickness_mm=height / layers, thin_wall_mm=0.3, hatch_pattern="islands")
+    out: dict = {"layers": layers, "layer_thickness_mm": params.layer_thickness_mm}
+    folders = {}
+    for n in (1, 2):
+        cluster = local_cluster(n)
+        try:
+            walls = []
+            for r in range(repeats):
+                d = Path(tempfile.mkdtemp(prefix=f"pbf-bench-{n}-"))
+                t0 = time.perf_counter()
+                build(stl, params, d, scheduler=cluster.scheduler_address, pictures=0, cli="binary")
+                walls.append(time.perf_counter() - t0)
+                if r == 0:
+                    folders[n] = d
+                else:
+                    shutil.rmtree(d)
+        finally:
+            cluster.close()
+        out[f"workers_{n}_wall_s"] = walls
+        print(
+            f"  Dask, {n} worker(s): {layers}-layer build min/median {min(walls):.2f}/{statistics.median(walls):.2f} s"
+        )
+    same = all(
+        (folders[1] / f).read_bytes() == (folders[2] / f).read_bytes()
+        for f in ["manifest.json", "build.cli"] + [f"layers/{p.name}" for p in (folders[1] / "layers").iterdir()]
+    )
+    ratio = statistics.median(out["workers_1_wall_s"]) / statistics.median(out["workers_2_wall_s"])
+    out.update(speedup=ratio, identical=same)
+    print(f"  Dask 2 workers / 1: {ratio:.2f}x faster; files identical: {same}")
+    for d in folders.values():
+        shutil.rmtree(d)
+    return out
+
+
 def run_pbf_benchmarks(stl: str | None = None, layers: int = 200, repeats: int = 3, pyslm_repeats: int = 1) -> dict:
     """Run the comparison on ``layers`` layers spread over the part's height; print and return the figures."""
     from jaxcnc.pbf.layer import process_chunk
@@ -103,6 +152,7 @@ def run_pbf_benchmarks(stl: str | None = None, layers: int = 200, repeats: int =
     out["jaxcnc_hatch_mm"] = our_len
     print(f"  jaxcnc            {n / st.wall_median:9.1f} layers/s  {st}; hatch {our_len:.1f} mm")
     print(f"  jaxcnc + zones    {n / st_z.wall_median:9.1f} layers/s  {st_z} (thin walls 0.3 mm, skins 1 layer)")
+    out["dask"] = dask_scaling(path, layers=200, repeats=repeats)
     if not pyslm_available():
         print("  PySLM: not installed (pip install 'jaxcnc[bench]'); its figures are not measured")
         return out
