@@ -69,10 +69,18 @@ class LaserConfig:
 
 @dataclass(frozen=True)
 class ScannerConfig:
-    """Additional fast axes summed with the main axes (galvo or light stage)."""
+    """Additional fast axes summed with the main axes (galvo or light stage).
+
+    The tool point is ``main + offset_mm + R(rotation_deg) · diag(scale) · (u, v)``: the scanner's
+    axes (``axes``, in its own frame) are scaled, rotated and offset into the main axes' frame (the
+    calibration). ``field_mm``: the full width of the field per scanner axis, centred on 0.
+    """
 
     axes: tuple[str, ...]
     field_mm: tuple[float, ...]
+    scale: tuple[float, ...] = (1.0, 1.0)
+    rotation_deg: float = 0.0
+    offset_mm: tuple[float, ...] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -205,6 +213,9 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
     "scanner": {
         "axes": ("string_list", True, None, None),
         "field_mm": ("number_list", True, None, None),
+        "scale": ("number_list", False, (1.0, 1.0), None),
+        "rotation_deg": ("number", False, 0.0, _finite),
+        "offset_mm": ("number_list", False, (0.0, 0.0), None),
     },
 }
 _TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner")
@@ -344,7 +355,17 @@ class _Loader:
                     raise self.fail("scanner", "axes", f"scanner axis {n!r} has no [axes.{n}] table")
             if len(sc["field_mm"]) != len(sc["axes"]) or any(f <= 0 for f in sc["field_mm"]):
                 raise self.fail("scanner", "field_mm", "needs one positive field size per scanner axis")
-            scanner = ScannerConfig(axes=sc["axes"], field_mm=sc["field_mm"])
+            if len(sc["scale"]) != len(sc["axes"]) or not all(math.isfinite(f) and f != 0 for f in sc["scale"]):
+                raise self.fail("scanner", "scale", "needs one finite, non-zero scale per scanner axis")
+            if len(sc["offset_mm"]) != len(sc["axes"]) or not all(math.isfinite(f) for f in sc["offset_mm"]):
+                raise self.fail("scanner", "offset_mm", "needs one finite offset per scanner axis")
+            scanner = ScannerConfig(
+                axes=sc["axes"],
+                field_mm=sc["field_mm"],
+                scale=sc["scale"],
+                rotation_deg=sc["rotation_deg"],
+                offset_mm=sc["offset_mm"],
+            )
         return MachineConfig(
             name=m["name"],
             tick_hz=m["tick_hz"],
