@@ -34,7 +34,7 @@ IMPORT_PLAYER_SIDE = textwrap.dedent(
         names += [m.name for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")]
     for name in names:
         importlib.import_module(name)
-    allowed = ("jaxcnc.format", "jaxcnc.hw", "jaxcnc.cli")
+    allowed = ("jaxcnc.format", "jaxcnc.hw", "jaxcnc.cli", "jaxcnc.plugins")  # plugins: the standard library only
     print(json.dumps({
         "imported": sorted(names),
         "stack": sorted(m for m in sys.modules if m.partition(".")[0] in PLANNING_STACK),

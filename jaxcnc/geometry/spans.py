@@ -29,7 +29,7 @@ from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
 from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
 from jaxcnc.program import Kind, Program
 
-__all__ = ["ArcTable", "PolyTable", "SpanKind", "Spans", "build_spans", "CURVED_KINDS", "POLY_KINDS"]
+__all__ = ["ArcTable", "PolyTable", "SpanKind", "Spans", "program_spans", "CURVED_KINDS", "POLY_KINDS"]
 
 #: Polynomial span degrees are bucketed to these values (few compiled kernels).
 DEGREE_BUCKETS = (2, 3, 5, 7)
@@ -372,15 +372,12 @@ def concat_spans(
     return assemble(cols, order_key, arc_table, merge_polys(polys))
 
 
-def build_spans(program: Program, corner_tol_mm: float = 0.0) -> Spans:
-    """Turn a Program's rows into spans in path order (vectorised over rows).
+def program_spans(program: Program) -> Spans:
+    """Turn a Program's rows into spans in path order (vectorised over rows), junctions as programmed.
 
-    Zero-length moves produce no span; dwell and event rows produce point spans. Junctions are
-    blended within the program's G64 P tolerance (``corner_tol_mm`` where G64 has no P; see
-    :mod:`jaxcnc.geometry.blend`).
+    Zero-length moves produce no span; dwell and event rows produce point spans. Blending the
+    junctions is the next step (:func:`jaxcnc.geometry.path.build_spans`).
     """
-    from jaxcnc.geometry.blend import blend_path
-
     kind = program.kind
     move_len = np.linalg.norm(program.end - program.start, axis=1)
     rows_line = np.flatnonzero((kind == Kind.LINE) & (move_len > MIN_LENGTH_MM))
@@ -396,8 +393,7 @@ def build_spans(program: Program, corner_tol_mm: float = 0.0) -> Spans:
     if rows_curve.size:
         parts.append(_curve_parts(program, rows_curve))
     # path order: by program row; the pieces of one curve row stay in order (the sort is stable)
-    spans = concat_spans(parts, np.concatenate([f["block"] for f, _ in parts]))
-    return blend_path(program, spans, corner_tol_mm)
+    return concat_spans(parts, np.concatenate([f["block"] for f, _ in parts]))
 
 
 def pad_spans(spans: Spans, n: int) -> Spans:

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from jaxcnc.errors import PlanningError, SourceError
-from jaxcnc.geometry.spans import SpanKind, Spans, build_spans
+from jaxcnc.geometry.path import build_spans
+from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, request_limits
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
