@@ -158,10 +158,19 @@ for _suffix in POINT_SUFFIXES:
     FRONT_ENDS.register(_suffix[1:], PointFileFrontEnd)
 
 
+#: Inputs another command reads, by suffix: what to do instead.
+ELSEWHERE = {
+    s: "a mesh is built layer by layer for powder-bed fusion: jaxcnc build MESH --machine PBF.toml -o FOLDER"
+    for s in ("stl", "3mf", "obj", "ply", "off")
+}
+
+
 def front_end_for(path: str | Path) -> FrontEnd:
     """The front end that reads ``path``, by its suffix; an error naming the file and the known suffixes."""
     path = Path(path)
     suffix = path.suffix.lower().lstrip(".")
+    if suffix in ELSEWHERE:
+        raise JaxcncError(f"{path}: {ELSEWHERE[suffix]}")
     if not suffix or suffix not in FRONT_ENDS:
         known = ", ".join("." + s for s in FRONT_ENDS.names())
         raise JaxcncError(f"{path}: unknown input type {path.suffix or '(no suffix)'!r}; jaxcnc reads {known}")
