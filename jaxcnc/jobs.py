@@ -96,14 +96,91 @@ def plan_file(
     progress: bool | None = None,
     dialect: str | None = None,
     reorder: bool = False,
+    split: str | None = None,
+    kinematics: str | Path | None = None,
+    split_plot: str | Path | None = None,
 ) -> dict:
-    """Plan ``input_path`` on the machine, write and verify the table at ``out``; the report dict."""
+    """Plan ``input_path`` on the machine, write and verify the table at ``out``; the report dict.
+
+    On a machine with a ``[scanner]`` a contour job is split between stage and scanner (``split``: ``own``
+    by default, ``seed``, or ``none`` for the stage alone; :func:`plan_split_file`).
+    """
     machine = _machine(machine)
     if is_point_job(input_path, machine):
+        if split not in (None, "none"):
+            raise JaxcncError("--split applies to contour jobs, not point-by-point pulsed ones")
         return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
     if reorder:
         raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
+    if split not in (None, "none"):
+        if machine.scanner is None:
+            raise JaxcncError(f"--split {split}: machine {machine.name!r} has no [scanner] section")
+    if machine.scanner is not None and split != "none":
+        return plan_split_file(input_path, machine, out, split or "own", progress, dialect, kinematics, split_plot)
+    if kinematics or split_plot:
+        raise JaxcncError("--kinematics and --split-plot belong to stage + scanner split jobs")
     return plan_program_file(input_path, machine, out, planner, progress, dialect)
+
+
+def plan_split_file(
+    input_path: str | Path,
+    machine: MachineConfig,
+    out: str | Path,
+    method: str = "own",
+    progress: bool | None = None,
+    dialect: str | None = None,
+    kinematics: str | Path | None = None,
+    split_plot: str | Path | None = None,
+) -> dict:
+    """Split a contour job between stage and scanner (:mod:`jaxcnc.planners.split`), write and check its
+    table (every axis' limits, the field, the tool point); the per-tick CSV and the picture on request."""
+    from jaxcnc.format import TableFile
+    from jaxcnc.planners.split import plan_split
+    from jaxcnc.ticks.split import check_split, kinematic_csv, plot_split, write_split_table
+    from jaxcnc.ticks.verify import measure_table
+
+    st = Stages(progress, f"splitting {Path(input_path).name}")
+    try:
+        with st.stage("parse"):
+            program = load_program(input_path, machine, dialect)
+        with st.stage("plan"):
+            plan = plan_split(program, machine, method)
+        with st.stage("ticks"):
+            write_split_table(plan, program, machine, out)
+        with st.stage("verify"):
+            table = TableFile(out)
+            meas = measure_table(table, machine)
+            chk = check_split(table, machine, program)
+    finally:
+        st.close()
+    if kinematics:
+        kinematic_csv(plan, kinematics)
+    if split_plot:
+        plot_split(plan, machine, split_plot)
+    t = st.seconds
+    return {
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": f"split-{method}",
+        "split": method,
+        "total_time_s": plan.total_time_s,
+        "n_blocks": program.n_blocks,
+        "n_ticks": plan.n_ticks,
+        "tick_hz": machine.tick_hz,
+        "path_length_mm": plan.path_length_mm,
+        "feed_mm_s": plan.feed_mm_s,
+        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
+        "timings_s": dict(t),
+        **measured(meas),
+        "max_path_deviation_mm": chk.max_tool_deviation_mm,
+        "path_tolerance_mm": table.header.discrete_mm,
+        "field_use": chk.max_field_use,
+        "split_stats": {k: v for k, v in plan.stats.items() if not isinstance(v, dict)},
+        "seed_figures": plan.stats.get("seed"),
+        "limits": limits(machine),
+        "violations": [str(v) for v in meas.violations] + chk.violations,
+    }
 
 
 def measured(meas) -> dict:
@@ -270,7 +347,16 @@ def check_table(
         meas.pulses = check_pulses(table, machine, job)
         meas.violations.extend(meas.pulses.violations)
     prog, meas.path_note = program_for_table(table, machine, Path(program) if program else None, dialect)
-    if prog is not None:
+    if prog is not None and table.header.meta.get("split") and machine.scanner is not None:
+        from jaxcnc.ticks.split import check_split  # stage + scanner: the tool point is main + scanner
+
+        chk = check_split(table, machine, prog)
+        meas.path_note = (
+            f"stage + scanner: tool point within {chk.max_tool_deviation_mm:.3g} mm of the program at every tick "
+            f"(allowed one discrete), scanner at most {100 * chk.max_field_use:.1f} % of its field"
+        )
+        meas.violations.extend(chk.violations)
+    elif prog is not None:
         meas.path = path_deviation(table, machine, prog)
         meas.violations.extend(meas.path.violations)
     return table, meas
