@@ -88,6 +88,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
         progress=False if args.quiet else None,
         dialect=args.dialect,
         reorder=args.reorder,
+        split=args.split,
+        kinematics=args.kinematics,
+        split_plot=args.split_plot,
     )
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
@@ -121,9 +124,28 @@ def cmd_plan(args: argparse.Namespace) -> int:
             f"{report['max_path_deviation_mm'] * 1e3:.3g} µm from the programmed path "
             f"(tolerance {report['path_tolerance_mm'] * 1e3:.3g} µm)"
         )
+    if not args.quiet and "split" in report:
+        print(
+            f"  stage + scanner ({report['split']}): {report['feed_mm_s'] * 60:.0f} mm/min along "
+            f"{report['path_length_mm']:.1f} mm, scanner at most {100 * report['field_use']:.1f} % of its field"
+        )
+        if report.get("seed_figures"):
+            f = report["seed_figures"]
+            print(
+                f"  documents' method: chord {f['step_mm']:.3g} mm, alpha_kr {f['alpha_kr_deg']:.2f} deg, their time "
+                f"{f['paper_time_s']:.3f} s, max Abig {f['paper_max_abig_mm_s2']:.4g} / Asmall "
+                f"{f['paper_max_asmall_mm_s2']:.4g} mm/s²; stage needs {f['intent_max_stage_accel_mm_s2']:.4g} mm/s²"
+            )
     if report["violations"]:
         for line in report["violations"][:50]:
             print(f"violation: {line}", file=sys.stderr)
+        if report.get("split") == "seed":
+            print(
+                "jaxcnc: error: the documents' split (--split seed, a reference) breaks these limits: its chord "
+                "smoothing does not bound the stage's acceleration; the table is written for comparison",
+                file=sys.stderr,
+            )
+            return 1
         print(
             "jaxcnc: error: the planned table breaks the machine limits, the path tolerance or the pulse windows "
             "(a planner bug; please report it)",
@@ -135,6 +157,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def _path_line(meas) -> str:
     """The check's summary of the path comparison."""
+    if meas.path is None and meas.path_note.startswith("stage + scanner"):
+        return f"  path: {meas.path_note}"
     if meas.path is None:
         return f"  path: not compared: {meas.path_note}"
     pd = meas.path
@@ -437,6 +461,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--dialect",
         help="G-code dialect: linuxcnc (default), siemens, fanuc, or a dialect TOML file",
     )
+    sp.add_argument(
+        "--split",
+        choices=("own", "seed", "none"),
+        help="machines with a [scanner]: split the contour between stage and scanner: own (default: low-pass "
+        "stage path, residual on the scanner), seed (the source documents' chord smoothing), none (stage alone)",
+    )
+    sp.add_argument("--kinematics", help="split jobs: write the per-tick kinematic table here (CSV)")
+    sp.add_argument("--split-plot", help="split jobs: draw S, S1, S2 and the field here (PNG)")
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
     sp.set_defaults(func=cmd_plan, needs=("jax",))
 
