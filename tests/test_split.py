@@ -130,3 +130,42 @@ def test_needs_a_scanner():
     m = make_machine()
     with pytest.raises(PlanningError, match=r"\[scanner\]"):
         plan_split(part(m), m)
+
+
+def test_cli_plans_splits_checks_and_writes_the_outputs(tmp_path, capsys):
+    import ezdxf
+
+    from jaxcnc.cli.main import main
+
+    mfile = tmp_path / "scan.toml"
+    mfile.write_text(MACHINE.format(field=20.0, extra=""))
+    doc = ezdxf.new(units=4)
+    msp = doc.modelspace()
+    msp.add_lwpolyline([(2, 2), (5, 1.5), (8, 2), (8, 6), (2, 6)], close=True)
+    msp.add_circle((5, 4), 0.5)
+    part_file = tmp_path / "p.dxf"
+    doc.saveas(part_file)
+    out = tmp_path / "p.ticks"
+    csv, png = tmp_path / "k.csv", tmp_path / "p.png"
+    args = [
+        "plan",
+        str(part_file),
+        "-m",
+        str(mfile),
+        "-o",
+        str(out),
+        "--kinematics",
+        str(csv),
+        "--split-plot",
+        str(png),
+    ]
+    assert main(args) == 0
+    assert "stage + scanner (own)" in capsys.readouterr().out
+    assert csv.stat().st_size > 0 and png.stat().st_size > 0
+    table = TableFile(out)
+    assert list(table.axes) == ["x", "y", "u", "v"] and table.header.meta["split"] == "own"
+    assert main(["check", str(out), "-m", str(mfile)]) == 0
+    assert "tool point within" in capsys.readouterr().out
+    none = tmp_path / "n.ticks"
+    assert main(["plan", str(part_file), "-m", str(mfile), "-o", str(none), "--split", "none", "-q"]) == 0
+    assert TableFile(none).header.n_rows > table.header.n_rows  # the stage alone is slower
