@@ -418,6 +418,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.pbf import run_pbf_benchmarks
 
         results["pbf"] = run_pbf_benchmarks(stl=args.stl)
+    if args.suite in ("all", "split"):
+        from jaxcnc.bench.split import run_split_benchmarks
+
+        results["split"] = run_split_benchmarks(repeats=args.repeats)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
@@ -605,7 +609,7 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed", "pbf"),
+        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed", "pbf", "split"),
         help="which benchmarks (default: %(default)s)",
     )
     sp.add_argument("--stl", help="pbf: the part (default: the corpus's frameGuide.stl)")
