@@ -169,3 +169,25 @@ def test_cli_plans_splits_checks_and_writes_the_outputs(tmp_path, capsys):
     none = tmp_path / "n.ticks"
     assert main(["plan", str(part_file), "-m", str(mfile), "-o", str(none), "--split", "none", "-q"]) == 0
     assert TableFile(none).header.n_rows > table.header.n_rows  # the stage alone is slower
+
+
+@pytest.mark.slow
+def test_must_show_part_three_times_faster_than_the_stage_alone(tmp_path):
+    """The issue's figure: sharp corners and small holes at 6 m/min, 0.5 g stage, 20 x 20 mm scanner."""
+    from jaxcnc.bench.split import MACHINE as BENCH_MACHINE
+    from jaxcnc.bench.split import make_part
+    from jaxcnc.front_ends import load_input
+    from jaxcnc.planners import plan_job
+
+    m = parse_machine(BENCH_MACHINE, "bench.toml")
+    prog = load_input(make_part(tmp_path / "part.dxf"), m)
+    plan = plan_split(prog, m)
+    table = TableFile(write_split_table(plan, prog, m, tmp_path / "own.ticks"))
+    meas, chk = measure_table(table, m), check_split(table, m, prog)
+    assert meas.violations == [] and chk.violations == []
+    assert max(meas.max_abs_a["x"], meas.max_abs_a["y"]) <= 0.5 * 9806.65
+    assert chk.max_field_use <= 1.0 and chk.max_tool_deviation_mm <= m.discrete_mm
+    assert plan.feed_mm_s == pytest.approx(100.0, rel=1e-3)
+    assert plan.total_time_s <= 1.05 * plan.path_length_mm / plan.feed_mm_s
+    alone = plan_job(prog, m).plan.total_time_s  # corners within one discrete, as the tool point
+    assert alone >= 3 * plan.total_time_s
