@@ -14,11 +14,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from jaxcnc.errors import SourceError
+
 if TYPE_CHECKING:
     from jaxcnc.machine import MachineConfig
 
 #: The program's coordinate axes, in column order of ``start``/``end``/``center``.
 PROGRAM_AXES = ("x", "y", "z")
+#: The slowest feed a program may set, mm/s: one micrometre in 1000 s (6e-5 mm/min). Slower is below physical
+#: sense for a laser machine — and a feed that underflows (``F0.000…1``) made a move's time infinite or zero.
+#: Slow feeds above it are limited by the job's bounds instead (:class:`jaxcnc.jobs.JobBounds`: a move that
+#: would take longer than the job may last is refused, naming its line, before anything is planned).
+MIN_FEED_MM_S = 1e-6
+#: An arc's radius below this (mm) is no arc: its centre is its start point.
+MIN_ARC_RADIUS_MM = 1e-9
+#: The arc planes and their (first, second) axes (G17 XY, G18 ZX, G19 YZ).
+_PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 
 
 def program_start(machine: MachineConfig) -> np.ndarray:
@@ -178,6 +189,9 @@ class Program:
     file: str = "<memory>"
     curves: CurveTable | None = None
 
+    def __post_init__(self) -> None:
+        check_program(self)
+
     def __len__(self) -> int:
         return int(self.kind.shape[0])
 
@@ -194,6 +208,70 @@ class Program:
         """True when some row moves axis ``axis`` (column index) or stands away from the start."""
         col = np.concatenate([self.start[:, axis], self.end[:, axis]])
         return bool(col.size) and bool(np.any(col != col[0]))
+
+
+def check_program(p: Program) -> None:
+    """Refuse rows below physical sense, whichever front end (or API caller) made them.
+
+    Raises :class:`SourceError` naming the program's file and the row's line, for the first row (in row order)
+    that has: an unknown kind; a start or end that is not finite; a feed that is not NaN (the machine's default)
+    and not a finite number of at least :data:`MIN_FEED_MM_S`; a dwell that is negative or not finite; a power
+    that is negative or not finite; a blend tolerance that is negative or NaN; an arc whose centre is not
+    finite, whose radius is below :data:`MIN_ARC_RADIUS_MM`, whose turn is not -1 or +1 or whose plane is not
+    17, 18 or 19; a curve row without its curve. Shapes: every column ``(n,)`` or ``(n, 3)``.
+    """
+    n = len(p)
+    if n == 0:
+        return
+    kind = p.kind
+    arc = kind == Kind.ARC
+    problems: list[tuple[np.ndarray, str]] = []
+
+    def add(bad: np.ndarray, why: str) -> None:
+        if bad.any():
+            problems.append((bad, why))
+
+    add(~np.isin(kind, [int(k) for k in Kind]), "unknown row kind (expected 1 line, 2 arc, 3 dwell, 4 event, 5 curve)")
+    add(~np.isfinite(p.start).all(axis=1) | ~np.isfinite(p.end).all(axis=1), "start or end is not a finite position")
+    feed = p.feed
+    add(
+        ~np.isnan(feed) & ~((feed >= MIN_FEED_MM_S) & np.isfinite(feed)),
+        f"feed is below physical sense or not finite (it must be at least {MIN_FEED_MM_S:g} mm/s, one micrometre "
+        "in 1000 s; or NaN for the machine's feed)",
+    )
+    add(~(p.dwell_s >= 0) | ~np.isfinite(p.dwell_s), "dwell time is negative or not finite")
+    add(~(p.power >= 0) | ~np.isfinite(p.power), "laser power is negative or not finite")
+    add(~(p.blend_tol >= 0), "blend tolerance is negative or NaN")
+    if arc.any():
+        a = np.flatnonzero(arc)
+        add_at = np.zeros(n, dtype=bool)
+        centre_bad = add_at.copy()
+        centre_bad[a] = ~np.isfinite(p.center[a]).all(axis=1)
+        add(centre_bad, "arc centre is not a finite position")
+        plane_bad = add_at.copy()
+        plane_bad[a] = ~np.isin(p.plane[a], list(_PLANE_AXES))
+        add(plane_bad, "arc plane must be 17 (XY), 18 (ZX) or 19 (YZ)")
+        turn_bad = add_at.copy()
+        turn_bad[a] = (p.turn[a] != 1) & (p.turn[a] != -1)
+        add(turn_bad, "arc turn must be +1 (counter-clockwise, G3) or -1 (clockwise, G2)")
+        first = np.where(p.plane[a] == 18, 2, np.where(p.plane[a] == 19, 1, 0))
+        second = np.where(p.plane[a] == 18, 0, np.where(p.plane[a] == 19, 2, 1))
+        with np.errstate(invalid="ignore"):
+            d = p.start[a] - p.center[a]
+            r = np.hypot(d[np.arange(a.size), first], d[np.arange(a.size), second])
+        radius_bad = add_at.copy()
+        radius_bad[a] = r < MIN_ARC_RADIUS_MM
+        add(radius_bad, f"arc radius is below {MIN_ARC_RADIUS_MM:g} mm: its centre is its start point")
+    curve = kind == Kind.CURVE
+    if curve.any():
+        count = 0 if p.curves is None else len(p.curves)
+        add(curve & ((p.curve < 0) | (p.curve >= count)), "curve row without its curve")
+    if not problems:
+        return
+    first_row = min(int(np.argmax(bad)) for bad, _ in problems)
+    why = next(why for bad, why in problems if bad[first_row])
+    line = int(p.line[first_row])
+    raise SourceError(p.file, line, 0, why if line else f"row {first_row}: {why}")
 
 
 # Column dtypes; ``from_columns`` fills defaults for what a front end leaves out.

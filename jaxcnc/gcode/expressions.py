@@ -15,13 +15,17 @@ Grammar (precedence from low to high, all binary operators left-associative)::
 
 Trigonometric functions work in degrees, as in RS274NGC. Names are case-insensitive and spaces
 are not significant (the caller removes them). Errors are raised as ``ExpressionError`` with the
-offset into the text, which the preprocessor turns into ``file:line:column``.
+offset into the text, which the preprocessor turns into ``file:line:column``. Every value is a finite double:
+a number, an operation or a function whose result overflows (or would be NaN) is such an error, so a
+condition is never NaN and a word never gets an infinite value. Digits are ASCII (``0-9``) only.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+
+from jaxcnc.gcode.lexer import non_ascii_digit
 
 _NUMBER_CHARS = "0123456789."
 
@@ -67,7 +71,22 @@ _BINARY_LEVELS = (
 )
 
 
+def _finite(v: float, offset: int, what: str) -> float:
+    """``v`` when it is a finite number; otherwise the located error (an overflow, or NaN from one)."""
+    if not math.isfinite(v):
+        raise ExpressionError(offset, f"{what} overflows a double" if math.isinf(v) else f"{what} is not a number")
+    return v
+
+
 def _apply(op: str, a: float, b: float, offset: int) -> float:
+    """``a op b``, finite, or an :class:`ExpressionError` at ``offset``."""
+    try:
+        return _finite(_apply_raw(op, a, b, offset), offset, f"{a:g} {op} {b:g}")
+    except OverflowError:
+        raise ExpressionError(offset, f"{a:g} {op} {b:g} overflows a double") from None
+
+
+def _apply_raw(op: str, a: float, b: float, offset: int) -> float:
     if op == "+":
         return a + b
     if op == "-":
@@ -124,7 +143,10 @@ class Parser:
         s = self.text[start : self.pos]
         if not s or s == "." or s.count(".") > 1:
             raise ExpressionError(start, f"malformed number {s!r}" if s else "expected a number")
-        return float(s)
+        if self.pos < len(self.text) and (why := non_ascii_digit(self.text[self.pos])):
+            raise ExpressionError(self.pos, why)
+        shown = s if len(s) <= 24 else f"{s[:10]}…{s[-4:]} ({len(s)} characters)"
+        return _finite(float(s), start, f"the number {shown}")
 
     # -- grammar -----------------------------------------------------------------------------
     def bracketed(self) -> float:
@@ -157,7 +179,7 @@ class Parser:
         if self.pos < len(self.text) and self.text[self.pos] in "+-":
             sign = -1.0 if self.text[self.pos] == "-" else 1.0
             self.pos += 1
-            return sign * self.unary()
+            return sign * self.unary()  # (the operand is finite: so is its negative)
         return self.primary()
 
     def primary(self) -> float:
@@ -170,6 +192,8 @@ class Parser:
             return self.parameter_value()
         if c in _NUMBER_CHARS:
             return self.number()
+        if why := non_ascii_digit(c):
+            raise ExpressionError(self.pos, why)
         if c.isalpha():
             return self.function()
         raise ExpressionError(self.pos, f"unexpected {c!r} in expression")
@@ -183,7 +207,7 @@ class Parser:
             y = self.bracketed()
             self.expect("/")
             x = self.bracketed()
-            return math.degrees(math.atan2(y, x))
+            return _finite(math.degrees(math.atan2(y, x)), start, f"ATAN[{y:g}]/[{x:g}]")
         if name == "EXISTS":
             self.expect("[")
             key = self.parameter_key()
@@ -193,9 +217,12 @@ class Parser:
             raise ExpressionError(start, f"unknown function or operator {name!r}")
         arg = self.bracketed()
         try:
-            return float(FUNCTIONS[name](arg))
+            v = float(FUNCTIONS[name](arg))
         except ValueError as exc:
             raise ExpressionError(start, str(exc)) from None
+        except OverflowError:
+            raise ExpressionError(start, f"{name}[{arg:g}] overflows a double") from None
+        return _finite(v, start, f"{name}[{arg:g}]")
 
     def parameter_key(self) -> object:
         """After '#': an integer, a ``<name>`` (lower-cased) or a bracketed/indirect number."""

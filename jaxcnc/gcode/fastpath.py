@@ -31,7 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxcnc.program import Kind
+from jaxcnc.gcode.lexer import MAX_COORDINATE
+from jaxcnc.program import MIN_FEED_MM_S, Kind
 
 #: The letters a plain block may hold, in the column order of :attr:`PlainTable.values`.
 PLAIN_LETTERS = "GXYZIJKRFSN"
@@ -122,6 +123,7 @@ def plain_table(texts: list[str], paren_comments: bool = True, semicolon_comment
     # Words the line-by-line interpreter refuses or treats otherwise: the block is complex.
     g = col == _G
     odd = ~np.isfinite(numbers)
+    odd |= (col >= _X) & (col <= _R) & (np.abs(numbers) > MAX_COORDINATE)  # the lexer refuses these
     odd |= g & (numbers != 0) & (numbers != 1) & (numbers != 2) & (numbers != 3)
     odd |= (col == _N) & ((numbers < 0) | (numbers != np.trunc(numbers)))
     odd |= ((col == _F) | (col == _S)) & (numbers < 0)
@@ -258,7 +260,10 @@ def _run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> 
         rows = np.flatnonzero(row_line)
         rm = motion[rows]
         # errors the interpreter raises for such blocks
-        bad = (axes & (motion < 0)) | ((ijk | P[:, _R]) & ~arc_line) | (row_line & (motion >= 10) & (feed_raw == 0))
+        # (a feed below the floor or beyond a double, as the interpreter computes it, is refused there)
+        feed_mm_s = feed_raw * st.scale / 60.0
+        slow = ~np.isnan(feed_raw) & ((feed_mm_s < MIN_FEED_MM_S) | ~np.isfinite(feed_mm_s))
+        bad = (axes & (motion < 0)) | ((ijk | P[:, _R]) & ~arc_line) | (row_line & (motion >= 10) & slow)
         # end points: absolute values forward-filled, or the increments summed in sequence from the start
         # point (an absent axis adds -0.0, which leaves every number as it is, -0.0 included)
         m = rows.size

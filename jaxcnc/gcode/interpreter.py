@@ -30,10 +30,11 @@ from jaxcnc.errors import SourceError
 from jaxcnc.gcode import fastpath
 from jaxcnc.gcode.dialect import LINUXCNC, Dialect, load_dialect
 from jaxcnc.gcode.fastpath import PlainTable, RunResult, RunState, interpret_run, plain_table
-from jaxcnc.gcode.lexer import Word, tokenize
+from jaxcnc.gcode.lexer import MAX_COORDINATE, Word, shown_number, tokenize
 from jaxcnc.gcode.preprocess import MAX_DEPTH, MAX_LINES, expand
 from jaxcnc.gcode.splines import NurbsBlock, bezier_curve
 from jaxcnc.program import (
+    MIN_FEED_MM_S,
     PROGRAM_COLUMNS,
     Event,
     Kind,
@@ -49,6 +50,8 @@ MM_PER_INCH = 25.4
 #: bisector so the arc passes exactly through both end points.
 ARC_RADIUS_TOL_MM = 2 * 0.01 * math.sqrt(2)
 ARC_RADIUS_TOL_INCH = 2 * 0.001 * math.sqrt(2)
+#: Most turns an arc's P word may ask for (each turn is a row of the program; a helix of more is a runaway).
+MAX_ARC_TURNS = 10_000
 #: Program axes (first, second, normal) of each arc plane; G18 is Z-X so that G3 is
 #: counter-clockwise seen from +Y, as RS274NGC defines it.
 PLANE_AXES = {17: (0, 1, 2), 18: (2, 0, 1), 19: (1, 2, 0)}
@@ -231,6 +234,8 @@ class _Block:
                 why = _LETTER_REASONS.get(w.letter)
                 raise self.error(w, f"unsupported word {w.letter}{w.text}" + (f": {why}" if why else ""))
             if w.letter in "GM":
+                if not abs(w.value) < 1e6:  # no G or M code is this large (and its tenths must stay an int)
+                    raise self.error(w, f"unknown or unsupported word {w.letter}{shown_number(w.text)}")
                 code = round(w.value * 10) if w.letter == "G" else round(w.value)
                 exact = w.value * 10 if w.letter == "G" else w.value
                 table, groups = (_G_GROUP, g_groups) if w.letter == "G" else (_M_GROUP, m_groups)
@@ -565,7 +570,16 @@ class _Interpreter:
             return math.nan  # the machine file's default contour feed applies
         if self.s.feed_raw == 0:
             raise b.error(w, "feed rate is zero (set F before feed moves)")
-        return self.s.feed_raw * self.s.scale / 60.0
+        feed = self.s.feed_raw * self.s.scale / 60.0
+        if not math.isfinite(feed):
+            raise b.error(w, f"feed rate F{self.s.feed_raw:g} overflows a double in mm/s")
+        if feed < MIN_FEED_MM_S:
+            raise b.error(
+                w,
+                f"feed rate F{self.s.feed_raw:.3g} ({feed:.3g} mm/s) is below physical sense: the slowest feed is "
+                f"{MIN_FEED_MM_S:g} mm/s, one micrometre in 1000 s",
+            )
+        return feed
 
     def home_move(self, b: _Block, axes: dict[int, Word]) -> None:
         """G28: rapid to the optional intermediate point, then the named axes (all if none) home."""
@@ -602,8 +616,8 @@ class _Interpreter:
         r = b.take("R")
         # P: the number of turns (a P of G4 or G64 in the same block is theirs)
         p = b.take("P") if b.has_g(40) is None and b.has_g(640) is None else None
-        if p is not None and (p.value != int(p.value) or p.value < 1):
-            raise b.error(p, f"arc turns P{p.text} must be a positive integer")
+        if p is not None and (p.value != int(p.value) or not 1 <= p.value <= MAX_ARC_TURNS):
+            raise b.error(p, f"arc turns P{shown_number(p.text)} must be a positive integer of at most {MAX_ARC_TURNS}")
         turns = 1 if p is None else int(p.value)
         normal_offset = words["IJK"[perm[2]]]
         if normal_offset is not None:
@@ -703,6 +717,10 @@ class _Interpreter:
         if w1 is None or w2 is None:
             w = w1 or w2
             raise b.error(w, f"{letters[0]} and {letters[1]} go together; only {w.letter} is given")
+        for w in (w1, w2):
+            if abs(w.value) > MAX_COORDINATE:
+                raise b.error(w, f"{w.letter}{shown_number(w.text)} is beyond ±{MAX_COORDINATE:g}: farther than any "
+                              "machine travels (a control point offset)")  # fmt: skip
         return np.array([w1.value, w2.value, 0.0]) * self.s.scale
 
     def bezier(self, b: _Block, axes: dict[int, Word], first: Word, cubic: bool) -> None:
@@ -970,8 +988,9 @@ def parse_gcode(
     dia = load_dialect(dialect)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
     it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia)
+    open_percent: list[int] = []  # the line of a '%' that opens the program when no second '%' closes it
     if _needs_preprocessor(text):
-        expanded = expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia)
+        expanded = expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia, percent=open_percent)
         texts = [e.text for e in expanded]
         lines = np.fromiter((e.line for e in expanded), dtype=np.int64, count=len(expanded))
     else:
@@ -980,6 +999,8 @@ def parse_gcode(
             marks = [i for i, raw in enumerate(texts) if "%" in raw and raw.strip() == "%"]
             if len(marks) > 1:
                 del texts[marks[1] :]  # the second '%' ends the program
+            elif marks:
+                open_percent.append(marks[0] + 1)
             if marks:
                 texts[marks[0]] = ""  # the first opens it
         lines = np.arange(1, len(texts) + 1, dtype=np.int64)
@@ -1014,6 +1035,10 @@ def parse_gcode(
         it.block(last)
         if it.ended:
             break
+    if open_percent and not it.ended:  # as in LinuxCNC: a program opened by '%' ends at a '%' (or at M2/M30)
+        raise SourceError(
+            file, open_percent[0], 1, "'%' opens the program but no closing '%' line follows (nor M2/M30)"
+        )
     it.close(last)  # (a run of plain blocks never leaves a spline open: ``last`` is only read then)
     curves = make_curve_table(it.s.curves) if it.s.curves else None
     return program_from_columns(file=file, curves=curves, **it.program())

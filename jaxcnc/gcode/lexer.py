@@ -7,12 +7,47 @@ keeps the 1-based column where its letter stands in the original line, for error
 
 from __future__ import annotations
 
+import math
 import re
+import unicodedata
 from dataclasses import dataclass
 
 from jaxcnc.errors import SourceError
 
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)")
+#: A number as RS274NGC writes it: ASCII digits only (``\d`` would also match Arabic-Indic or full-width digits,
+#: which ``float()`` reads; G-code is ISO-7bit, so those are refused).
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)")
+#: Largest magnitude of a coordinate word (X Y Z I J K R, program units). No machine travels 1000 km, and below
+#: it every product the interpreter forms (radius², inch scaling, offsets) stays far from overflow.
+MAX_COORDINATE = 1e9
+COORDINATE_LETTERS = frozenset("XYZIJKR")
+
+
+def shown_number(text: str) -> str:
+    """A number's text for a message: long ones shortened (``1111…111, 400 digits``)."""
+    return text if len(text) <= 24 else f"{text[:10]}…{text[-4:]} ({len(text)} characters)"
+
+
+def non_ascii_digit(c: str) -> str | None:
+    """The reason to refuse ``c`` when it is a digit other than ASCII 0-9 (else ``None``)."""
+    if c.isascii() or not (c.isdigit() or c.isnumeric()):
+        return None
+    name = unicodedata.name(c, f"U+{ord(c):04X}")
+    return f"non-ASCII digit {c!r} ({name}): G-code numbers are written with the ASCII digits 0-9"
+
+
+def number_value(letter: str, text: str) -> float | str:
+    """The value of a word's number ``text``, or the reason to refuse it (it overflows, or a coordinate is
+    beyond :data:`MAX_COORDINATE`)."""
+    v = float(text)
+    if not math.isfinite(v):
+        return f"{letter}{shown_number(text)}: the number overflows a double (it is beyond 1.8e308)"
+    if letter in COORDINATE_LETTERS and abs(v) > MAX_COORDINATE:
+        return (
+            f"{letter}{shown_number(text)} is beyond ±{MAX_COORDINATE:g}: farther than any machine travels "
+            "(a coordinate, centre or radius)"
+        )
+    return v
 
 
 @dataclass(frozen=True)
@@ -87,10 +122,18 @@ def tokenize(raw: str, file: str, line_no: int, dialect=None) -> tuple[list[Word
             continue
         for name in addresses:
             if upper.startswith(name + "=", i):
-                m = _NUMBER.match(text, i + len(name) + 1)
+                at = i + len(name) + 1
+                m = _NUMBER.match(text, at)
+                while at < n and text[at] in "+-.0123456789":
+                    at += 1
+                if at < n and (why := non_ascii_digit(text[at])):
+                    raise SourceError(file, line_no, cols[i], why)
                 if m is None:
                     raise SourceError(file, line_no, cols[i], f"{name}= needs a number")
-                words.append(Word(name, float(m.group(0)), m.group(0), cols[i]))
+                value = number_value(name, m.group(0))
+                if isinstance(value, str):
+                    raise SourceError(file, line_no, cols[i], value)
+                words.append(Word(name, value, m.group(0), cols[i]))
                 i = m.end()
                 matched = True
                 break
@@ -98,6 +141,8 @@ def tokenize(raw: str, file: str, line_no: int, dialect=None) -> tuple[list[Word
             continue
         c = text[i]
         col = cols[i]
+        if why := non_ascii_digit(c):
+            raise SourceError(file, line_no, col, why)
         if not c.isascii() or not c.isalpha():
             if c in "#[]":
                 raise SourceError(
@@ -117,6 +162,11 @@ def tokenize(raw: str, file: str, line_no: int, dialect=None) -> tuple[list[Word
             raise SourceError(file, line_no, col, f"unexpected character {shown!r}: expected a word such as G1 or X10")
         letter = c.upper()
         m = _NUMBER.match(text, i + 1)
+        after = i + 1
+        while after < n and text[after] in "+-.0123456789":
+            after += 1
+        if after < n and (why := non_ascii_digit(text[after])):
+            raise SourceError(file, line_no, col, why)
         if m is None and i + 1 < n and text[i + 1] in "#[":
             raise SourceError(file, line_no, cols[i + 1], f"unexpected {text[i + 1]!r} after {c.upper()!r}")
         if m is None and i + 1 < n and text[i + 1].isalpha():
@@ -143,6 +193,9 @@ def tokenize(raw: str, file: str, line_no: int, dialect=None) -> tuple[list[Word
             raise SourceError(file, line_no, col, f"malformed number {text[i + 1 : end + 1]!r} after {letter!r}")
         if letter == "O":
             raise SourceError(file, line_no, col, "an O-word must start its line (O100 sub, O100 if [...], ...)")
-        words.append(Word(letter, float(m.group(0)), m.group(0), col))
+        value = number_value(letter, m.group(0))
+        if isinstance(value, str):
+            raise SourceError(file, line_no, col, value)
+        words.append(Word(letter, value, m.group(0), col))
         i = end
     return words, comments

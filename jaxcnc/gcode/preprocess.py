@@ -190,6 +190,8 @@ class Preprocessor:
         v, end = self.evaluate(frame, ol.index, ol.arg, ol.arg_col)
         if end != len(ol.arg):
             raise self.err(ol.index, ol.arg_col[end], f"unexpected text after the condition: {ol.arg[end:]!r}")
+        if not np.isfinite(v):  # pragma: no cover - the parser never yields one; a NaN must never read as true
+            raise self.err(ol.index, ol.arg_col[0], f"condition is {v}")
         return v
 
     # -- blocks ----------------------------------------------------------------------------
@@ -225,10 +227,10 @@ class Preprocessor:
                     )
                 ):
                     value, pos = self.evaluate(frame, i, text, cols, value_start)
-                    out.append(letter + format_number(value))
+                    out.append(letter + format_number(value))  # (finite: the parser refuses anything else)
                     continue
                 end = value_start
-                while end < len(text) and (text[end] in "+-." or text[end].isdigit()):
+                while end < len(text) and text[end] in "+-.0123456789":
                     end += 1
                 out.append(letter + text[value_start:end])
                 pos = end
@@ -258,6 +260,7 @@ class Preprocessor:
         i = 0
         n = len(self.lines)
         percent = False
+        self.open_percent: int | None = None  # the source line of a '%' that opened the program, until closed
         while i < n:
             executed += 1
             if executed > self.max_lines:
@@ -266,7 +269,10 @@ class Preprocessor:
             raw = self.lines[i]
             if raw.strip() == "%":
                 if percent and len(stack) == 1:
+                    self.open_percent = None
                     break
+                if not percent:
+                    self.open_percent = i + 1
                 percent = True
                 i += 1
                 continue
@@ -343,7 +349,7 @@ class Preprocessor:
             key = ("repeat", i)
             if key not in frame.local:
                 count, _ = self.evaluate(frame, i, ol.arg, ol.arg_col) if ol.arg else (0.0, 0)
-                if count != int(count) or count < 0:
+                if not np.isfinite(count) or count != int(count) or count < 0:
                     raise self.err(i, 0, f"repeat count {count:g} must be a non-negative integer")
                 frame.local[key] = int(count)
             if frame.local[key] <= 0:
@@ -376,10 +382,24 @@ class Preprocessor:
 
 
 def expand(
-    text: str, file: str = "<string>", *, max_depth: int = MAX_DEPTH, max_lines: int = MAX_LINES, dialect=None
+    text: str,
+    file: str = "<string>",
+    *,
+    max_depth: int = MAX_DEPTH,
+    max_lines: int = MAX_LINES,
+    dialect=None,
+    percent: list[int] | None = None,
 ) -> list[ExpandedLine]:
-    """Flatten a parametric program; see the module docstring. ``dialect`` sets the comment styles."""
-    return Preprocessor(text, file, max_depth, max_lines, dialect).run()
+    """Flatten a parametric program; see the module docstring. ``dialect`` sets the comment styles.
+
+    ``percent``: when given, the source line of a ``%`` that opened the program and was never closed is appended
+    to it (the interpreter refuses that unless the program ends with M2/M30 first, as LinuxCNC does).
+    """
+    pre = Preprocessor(text, file, max_depth, max_lines, dialect)
+    out = pre.run()
+    if percent is not None and pre.open_percent is not None:
+        percent.append(pre.open_percent)
+    return out
 
 
 def expand_text(text: str, file: str = "<string>", **kwargs) -> str:
