@@ -193,3 +193,24 @@ def test_time_law_s_of_t_and_its_speed():
     np.testing.assert_allclose(ds, (v[1:] + v[:-1]) / 2, atol=2000 / m.tick_hz)
     assert v.max() == pytest.approx(100.0, rel=1e-4)  # F6000 = 100 mm/s, reached on the long lines
     assert np.all(v >= 0)
+
+
+def test_a_plan_of_motion_in_zero_time_is_refused():
+    """A straight quadratic NURBS (control points evenly spaced on a line) once planned in zero time with
+    topp: the one-row table stayed at the start, the program ended 10 mm away, and the table check saw no
+    motion at all. plan_job refuses such a time law whatever the planner (known topp defect, see issue 13)."""
+    from jaxcnc.errors import PlanningError
+    from jaxcnc.io.curves import curves_program
+    from jaxcnc.planners import plan_job
+
+    pts = np.array([[0.0, 0, 0], [5, 0, 0], [10, 0, 0]])
+    knots = np.r_[np.zeros(3), np.ones(3)]
+    prog = curves_program([(2, pts, np.ones(3), knots)], 50.0, start=pts[0])
+    machine = make_machine()
+    assert plan_job(prog, machine, "lookahead").plan.total_time_s > 0.2  # 10 mm at 50 mm/s at least
+    try:
+        job = plan_job(prog, machine, "topp")
+    except PlanningError as exc:
+        assert "in zero time" in str(exc)
+    else:  # the defect fixed: then the plan must take the time the motion needs
+        assert job.plan.total_time_s > 0.2

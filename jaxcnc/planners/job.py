@@ -130,6 +130,14 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
         if one_line is None:
             raise
         raise one_line from None
+    moving_mm = float(np.sum(spans.length[spans.kind != SpanKind.POINT]))
+    if plan.n_ticks <= 0 and moving_mm > 0:
+        # a time law that covers a moving program in no time would leave the table at the start while the
+        # program ends elsewhere (the table's check sees no motion at all): refuse it loudly
+        raise PlanningError(
+            f"{program.file}: planner {name!r} planned {moving_mm:.6g} mm of motion in zero time "
+            "(a planner bug; please report it, and plan with another --planner meanwhile)"
+        )
     return PlannedJob(
         program=program,
         spans=spans,
