@@ -80,6 +80,8 @@ def _fmt_axes(d: dict[str, float], unit: str) -> str:
 def cmd_plan(args: argparse.Namespace) -> int:
     from jaxcnc.jobs import plan_file
 
+    from jaxcnc.jobs import JobBounds
+
     report = plan_file(
         Path(args.input),
         Path(args.machine),
@@ -91,6 +93,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         split=args.split,
         kinematics=args.kinematics,
         split_plot=args.split_plot,
+        bounds=JobBounds(max_ticks=args.max_ticks, max_bytes=args.max_bytes, max_duration_s=args.max_duration),
+        allow_repeats=args.allow_repeats,
     )
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
@@ -427,6 +431,37 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+_SIZE_UNITS = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+_TIME_UNITS = {"": 1.0, "s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def _positive_number(text: str, units: dict, what: str) -> float:
+    """``text`` as a positive finite number with an optional unit suffix from ``units``."""
+    t = text.strip()
+    body = t.rstrip("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ")
+    unit = t[len(body) :]
+    unit = {"KiB": "K", "MiB": "M", "GiB": "G", "TiB": "T"}.get(unit, unit)
+    try:
+        v = float(body) * units[unit]
+    except (KeyError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+    if not (np.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}")
+    return v
+
+
+def _count(text: str) -> int:
+    return int(_positive_number(text.replace("_", "").replace(",", ""), {"": 1}, "a positive count"))
+
+
+def _size(text: str) -> int:
+    return int(_positive_number(text, _SIZE_UNITS, "a size (bytes, or with K, M, G, T: binary units)"))
+
+
+def _duration(text: str) -> float:
+    return _positive_number(text, _TIME_UNITS, "a duration (seconds, or with s, min, h, d)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="jaxcnc",
@@ -460,6 +495,30 @@ def build_parser() -> argparse.ArgumentParser:
         "--reorder",
         action="store_true",
         help="point jobs: burn the points in serpentine raster order (the report gives the as-given time too)",
+    )
+    sp.add_argument(
+        "--allow-repeats",
+        action="store_true",
+        help="point jobs: burn a point given twice (within a quarter discrete, anywhere in the job) once per time "
+        "it is given; without it such a job is refused, naming both lines",
+    )
+    sp.add_argument(
+        "--max-ticks",
+        type=_count,
+        default=1_000_000_000,
+        help="refuse a job whose table would have more rows, before anything is written (default: 1,000,000,000)",
+    )
+    sp.add_argument(
+        "--max-bytes",
+        type=_size,
+        default=32 * 2**30,
+        help="refuse a job whose table file would be larger, e.g. 500M, 64G (default: 32 GiB)",
+    )
+    sp.add_argument(
+        "--max-duration",
+        type=_duration,
+        default=24 * 3600.0,
+        help="refuse a job that would last longer, e.g. 90s, 30min, 48h, 2d (default: 24 h)",
     )
     sp.add_argument(
         "--dialect",
