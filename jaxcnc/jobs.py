@@ -14,14 +14,17 @@ path (:mod:`jaxcnc.ticks.deviation`) and, for pulsed jobs, the pulses (:mod:`jax
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from jaxcnc.errors import JaxcncError
+from jaxcnc.errors import JaxcncError, SourceError
 from jaxcnc.front_ends import FRONT_ENDS, GCODE_SUFFIXES, POINT_SUFFIXES, front_end_for  # noqa: F401  (part of this API)
 from jaxcnc.machine import MachineConfig, load_machine
 from jaxcnc.program import PointJob, Program
@@ -30,6 +33,165 @@ if TYPE_CHECKING:
     from jaxcnc.format import TableFile
 
 STAGES = ("parse", "plan", "ticks", "verify")
+
+
+@dataclass(frozen=True)
+class JobBounds:
+    """How large a job's table may be: a job beyond any bound is refused before anything is planned (on a lower
+    bound of its duration, naming the block that crosses it) and again before anything is written (on the plan).
+
+    The defaults let a day-long job at 10 kHz on a three-axis machine through (8.6e8 ticks, ~21 GB) and refuse the
+    runaways of a slow feed or a long dwell (``G1 X10 F0.001`` would be 6.9 days, 144 GB; ``G4 P1e7`` 116 days).
+    Raise them with ``jaxcnc plan --max-ticks/--max-bytes/--max-duration`` or ``plan_file(bounds=JobBounds(...))``.
+
+    Attributes:
+        max_ticks: rows of the table (1e9 by default).
+        max_bytes: size of the table file, positions and the fine channel (32 GiB by default).
+        max_duration_s: the job's duration in seconds (24 h by default).
+    """
+
+    max_ticks: int = 1_000_000_000
+    max_bytes: int = 32 * 2**30
+    max_duration_s: float = 24 * 3600.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_ticks", "max_bytes", "max_duration_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise JaxcncError(f"job bound {name} = {v!r}: must be a positive finite number")
+
+
+DEFAULT_BOUNDS = JobBounds()
+
+
+def table_bytes(n_rows: int, n_axes: int) -> int:
+    """The size in bytes of a table of ``n_rows`` rows and ``n_axes`` axes (positions and the fine channel, whole
+    blocks, the header page), without its events: what :class:`~jaxcnc.format.TableWriter` allocates."""
+    from jaxcnc.format.tablefile import DEFAULT_BLOCK_ROWS
+
+    blocks = -(-int(n_rows) // DEFAULT_BLOCK_ROWS)
+    return 4096 + blocks * (DEFAULT_BLOCK_ROWS * n_axes * 4 * 2 + 8)
+
+
+def _fmt_bytes(n: float) -> str:
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
+def _fmt_s(t: float) -> str:
+    if t >= 86400:
+        return f"{t:.4g} s ({t / 86400:.3g} days)"
+    if t >= 3600:
+        return f"{t:.4g} s ({t / 3600:.3g} h)"
+    return f"{t:.4g} s"
+
+
+def _limits_s(machine: MachineConfig, bounds: JobBounds) -> list[tuple[float, str]]:
+    """Each bound as the longest duration (s) it allows on ``machine``, with its option and value."""
+    from jaxcnc.format.tablefile import DEFAULT_BLOCK_ROWS
+
+    n_axes = len(machine.axes)
+    blocks = max(0, bounds.max_bytes - 4096) // (DEFAULT_BLOCK_ROWS * n_axes * 8 + 8)
+    rows_by_bytes = blocks * DEFAULT_BLOCK_ROWS
+    hz = machine.tick_hz
+    return [
+        (bounds.max_duration_s, f"--max-duration {_fmt_s(bounds.max_duration_s)}"),
+        (
+            (bounds.max_ticks - 1) / hz,
+            f"--max-ticks {bounds.max_ticks:,} ({(bounds.max_ticks - 1) / hz:.4g} s at {hz:g} Hz)",
+        ),
+        (
+            max(rows_by_bytes - 1, 0) / hz,
+            f"--max-bytes {_fmt_bytes(bounds.max_bytes)} ({max(rows_by_bytes - 1, 0) / hz:.4g} s of {n_axes}-axis "
+            f"table at {hz:g} Hz)",
+        ),
+    ]
+
+
+def _beyond(total_s: float, machine: MachineConfig, bounds: JobBounds) -> list[str]:
+    return [what for limit, what in _limits_s(machine, bounds) if total_s > limit]
+
+
+def check_program_bounds(program: Program, machine: MachineConfig, bounds: JobBounds = DEFAULT_BOUNDS) -> None:
+    """Refuse a program whose table would exceed ``bounds``, before it is planned.
+
+    A lower bound of each row's time: its chord (no path is shorter) at its feed (the programmed one, the
+    machine's default, or the rapid cap for G0; the plan never goes faster), or its dwell. When their running sum
+    passes the tightest bound, the row where it does is named (``file:line``) with the bounds it breaks.
+    """
+    from jaxcnc.program import Kind
+
+    if len(program) == 0:
+        return
+    moving = program.is_motion
+    chord = np.linalg.norm(program.end - program.start, axis=1)
+    speed = np.where(
+        program.rapid, machine.path.rapid, np.where(np.isnan(program.feed), machine.path.feed, program.feed)
+    )
+    with np.errstate(over="ignore", invalid="ignore"):
+        move_s = np.where(moving, chord / speed, 0.0)
+        dwell_s = np.where(program.kind == Kind.DWELL, program.dwell_s, 0.0)
+        row_s = move_s + dwell_s
+        total = np.cumsum(row_s)
+    limit = min(lim for lim, _ in _limits_s(machine, bounds))
+    if not total[-1] > limit:
+        return
+    k = int(np.argmax(total > limit))
+    if program.kind[k] == Kind.DWELL:
+        what = f"a dwell of {_fmt_s(float(dwell_s[k]))}"
+    else:
+        what = f"{chord[k]:.4g} mm at {speed[k]:.3g} mm/s, at least {_fmt_s(float(move_s[k]))}"
+    beyond = _beyond(float(total[-1]) if math.isfinite(total[-1]) else math.inf, machine, bounds)
+    raise SourceError(
+        program.file,
+        int(program.line[k]),
+        0,
+        f"the job would last at least {_fmt_s(float(total[k]))} up to this block ({what}), beyond "
+        f"{'; '.join(beyond)}: refused before anything is planned or written (raise the bound if it is meant)",
+    )
+
+
+def _check_points_bounds(job: PointJob, machine: MachineConfig, bounds: JobBounds) -> None:
+    """A point job lasts at least one shortest pulse period per interval between its points: refused before
+    planning when that passes a bound (naming the point where it does)."""
+    from jaxcnc.planners.pulsed import pulse_window
+
+    period = pulse_window(machine).shortest_period_s
+    limit = min(lim for lim, _ in _limits_s(machine, bounds))
+    if (len(job) - 1) * period <= limit:
+        return
+    k = int(limit // period) + 1
+    total = (len(job) - 1) * period
+    raise SourceError(
+        job.file,
+        int(job.line[k]),
+        0,
+        f"{len(job):,} points burn for at least {_fmt_s(total)} ({_fmt_s(period)} per point at the lamp's shortest "
+        f"period), beyond {'; '.join(_beyond(total, machine, bounds))}: refused before anything is planned or "
+        "written (raise the bound if it is meant)",
+    )
+
+
+def check_planned_bounds(
+    file: str, n_rows: int, total_time_s: float, machine: MachineConfig, bounds: JobBounds = DEFAULT_BOUNDS
+) -> None:
+    """Refuse a planned job whose table (``n_rows`` rows, ``total_time_s`` s) exceeds ``bounds``, before it is
+    written."""
+    size = table_bytes(n_rows, len(machine.axes))
+    broken = []
+    if total_time_s > bounds.max_duration_s:
+        broken.append(f"--max-duration {_fmt_s(bounds.max_duration_s)}")
+    if n_rows > bounds.max_ticks:
+        broken.append(f"--max-ticks {bounds.max_ticks:,}")
+    if size > bounds.max_bytes:
+        broken.append(f"--max-bytes {_fmt_bytes(bounds.max_bytes)}")
+    if broken:
+        raise JaxcncError(
+            f"{file}: the planned job lasts {_fmt_s(total_time_s)} = {n_rows:,} ticks, a table of "
+            f"{_fmt_bytes(size)}: beyond {'; '.join(broken)}; nothing was written (raise the bound if it is meant)"
+        )
 
 
 class Stages:
@@ -77,15 +239,23 @@ def is_point_job(input_path: str | Path, machine: MachineConfig) -> bool:
     return front_end_for(input_path).produces == "points" or machine.laser.mode == "pulsed"
 
 
-def load_point_job(input_path: str | Path, machine: MachineConfig, dialect: str | None = None) -> PointJob:
-    """The points of a point job: read from a point file, or the G1 end points of a program."""
+def load_point_job(
+    input_path: str | Path, machine: MachineConfig, dialect: str | None = None, allow_repeats: bool = False
+) -> PointJob:
+    """The points of a point job: read from a point file, or the G1 end points of a program.
+
+    ``allow_repeats``: the user asks for repeated burns (a point given twice is burned twice); otherwise such a
+    job is refused when planned, naming both lines.
+    """
     from jaxcnc.io.points import points_from_program
 
     input_path = Path(input_path)
     fe = front_end_for(input_path)
     if fe.produces == "points":
-        return fe.load(input_path, machine, dialect=dialect)
-    return points_from_program(fe.load(input_path, machine, dialect=dialect))
+        job = fe.load(input_path, machine, dialect=dialect)
+    else:
+        job = points_from_program(fe.load(input_path, machine, dialect=dialect))
+    return dataclasses.replace(job, allow_repeats=True) if allow_repeats else job
 
 
 def plan_file(
@@ -99,27 +269,37 @@ def plan_file(
     split: str | None = None,
     kinematics: str | Path | None = None,
     split_plot: str | Path | None = None,
+    bounds: JobBounds = DEFAULT_BOUNDS,
+    allow_repeats: bool = False,
 ) -> dict:
     """Plan ``input_path`` on the machine, write and verify the table at ``out``; the report dict.
 
     On a machine with a ``[scanner]`` a contour job is split between stage and scanner (``split``: ``own``
-    by default, ``seed``, or ``none`` for the stage alone; :func:`plan_split_file`).
+    by default, ``seed``, or ``none`` for the stage alone; :func:`plan_split_file`). ``bounds``: how large the
+    table may be (:class:`JobBounds`; a job beyond them is refused before anything is written).
+    ``allow_repeats``: point jobs burn a point given twice twice instead of refusing it.
     """
     machine = _machine(machine)
     if is_point_job(input_path, machine):
         if split not in (None, "none"):
             raise JaxcncError("--split applies to contour jobs, not point-by-point pulsed ones")
-        return plan_points_file(input_path, machine, out, planner, progress, dialect, reorder)
+        return plan_points_file(
+            input_path, machine, out, planner, progress, dialect, reorder, bounds=bounds, allow_repeats=allow_repeats
+        )
+    if allow_repeats:
+        raise JaxcncError("--allow-repeats applies to point-by-point jobs (point files or pulsed machines)")
     if reorder:
         raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
     if split not in (None, "none"):
         if machine.scanner is None:
             raise JaxcncError(f"--split {split}: machine {machine.name!r} has no [scanner] section")
     if machine.scanner is not None and split != "none":
-        return plan_split_file(input_path, machine, out, split or "own", progress, dialect, kinematics, split_plot)
+        return plan_split_file(
+            input_path, machine, out, split or "own", progress, dialect, kinematics, split_plot, bounds=bounds
+        )
     if kinematics or split_plot:
         raise JaxcncError("--kinematics and --split-plot belong to stage + scanner split jobs")
-    return plan_program_file(input_path, machine, out, planner, progress, dialect)
+    return plan_program_file(input_path, machine, out, planner, progress, dialect, bounds=bounds)
 
 
 def plan_split_file(
@@ -131,6 +311,7 @@ def plan_split_file(
     dialect: str | None = None,
     kinematics: str | Path | None = None,
     split_plot: str | Path | None = None,
+    bounds: JobBounds = DEFAULT_BOUNDS,
 ) -> dict:
     """Split a contour job between stage and scanner (:mod:`jaxcnc.planners.split`), write and check its
     table (every axis' limits, the field, the tool point); the per-tick CSV and the picture on request."""
@@ -143,8 +324,10 @@ def plan_split_file(
     try:
         with st.stage("parse"):
             program = load_program(input_path, machine, dialect)
+            check_program_bounds(program, machine, bounds)
         with st.stage("plan"):
             plan = plan_split(program, machine, method)
+            check_planned_bounds(str(input_path), plan.n_ticks, plan.total_time_s, machine, bounds)
         with st.stage("ticks"):
             write_split_table(plan, program, machine, out)
         with st.stage("verify"):
@@ -200,8 +383,11 @@ def plan_program_file(
     planner: str | None = None,
     progress: bool | None = None,
     dialect: str | None = None,
+    bounds: JobBounds = DEFAULT_BOUNDS,
 ) -> dict:
-    """Plan a contour program (G-code), write its table and verify it (limits, the path); the report."""
+    """Plan a contour program (G-code), write its table and verify it (limits, the path); the report.
+
+    ``bounds``: refused before anything is planned or written when the table would exceed them."""
     from jaxcnc.jaxconfig import configure_jax
 
     configure_jax()  # float64 and the persistent compile cache
@@ -217,8 +403,10 @@ def plan_program_file(
     try:
         with st.stage("parse"):
             program = load_program(input_path, machine, dialect)
+            check_program_bounds(program, machine, bounds)
         with st.stage("plan"):
             job = plan_job(program, machine, planner=planner)
+            check_planned_bounds(str(input_path), job.plan.n_ticks + 1, job.plan.total_time_s, machine, bounds)
         with st.stage("ticks"):
             write_table(job, out, progress=progress, planner=planner)
         with st.stage("verify"):
@@ -257,8 +445,13 @@ def plan_points_file(
     progress: bool | None = None,
     dialect: str | None = None,
     reorder: bool = False,
+    bounds: JobBounds = DEFAULT_BOUNDS,
+    allow_repeats: bool = False,
 ) -> dict:
-    """Plan a point-by-point pulsed job, write its table and verify it; the report (with the comparisons)."""
+    """Plan a point-by-point pulsed job, write its table and verify it; the report (with the comparisons).
+
+    ``bounds``: refused before anything is planned or written when the table would exceed them;
+    ``allow_repeats``: burn a point given twice twice (else refused, naming both lines)."""
     from jaxcnc.jaxconfig import configure_jax
 
     configure_jax()  # float64 and the persistent compile cache
@@ -273,10 +466,13 @@ def plan_points_file(
     st = Stages(progress, f"planning {Path(input_path).name}")
     try:
         with st.stage("parse"):
-            given = load_point_job(input_path, machine, dialect)
+            given = load_point_job(input_path, machine, dialect, allow_repeats)
+            _check_points_bounds(given, machine, bounds)
         with st.stage("plan"):
             job = given.take(serpentine_order(given.points)) if reorder else given
             planned = plan_points(job, machine, planner)
+            traj = planned.plan.trajectory
+            check_planned_bounds(str(input_path), traj.n_ticks + 1, traj.total_time_s, machine, bounds)
         with st.stage("ticks"):
             write_pulse_table(planned, out, progress=progress)
         with st.stage("verify"):
@@ -420,4 +616,4 @@ def points_of_table(table, machine: MachineConfig, points: str | Path | None):
     if points is None and meta.get("source_sha256"):
         if file_sha256(source) != meta["source_sha256"]:
             raise JaxcncError(f"{source}: changed since the table was planned (checksum differs); pass --points FILE")
-    return load_point_job(source, machine)
+    return load_point_job(source, machine, allow_repeats=True)  # the check verifies what was planned

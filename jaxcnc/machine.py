@@ -31,6 +31,14 @@ AXIS_NAMES = ("x", "y", "z", "a", "b", "c", "u", "v", "w")
 REQUIRED_AXES = ("x", "y")
 #: Positions are stored as int32 discretes in the table file.
 _INT32_MAX = 2**31 - 1
+#: Travel (and scanner field) may span at most this many discretes from 0: half of int32, so that no
+#: position the planner, an overshoot, a scanner offset or the fine channel adds can overflow a table's int32.
+INT32_SAFE_DISCRETES = 2**30
+#: The range of tick rates (Hz): servo and scanner boards run at 1 kHz to a few hundred kHz; below 10 Hz a
+#: table is no motion control, above 1 MHz it is a typo (1e9 would write 24 GB per second of motion).
+TICK_HZ_RANGE = (10.0, 1e6)
+#: The finest discrete (mm): 0.1 nm, below any encoder.
+MIN_DISCRETE_MM = 1e-7
 
 
 @dataclass(frozen=True)
@@ -154,9 +162,20 @@ def _speed(v: float) -> str | None:
     return None
 
 
+def _tick_rate(v: float) -> str | None:
+    if (e := _positive(v)) is not None:
+        return e
+    lo, hi = TICK_HZ_RANGE
+    if not lo <= v <= hi:
+        return f"{v:g} Hz is outside {lo:g} Hz to {hi:g} Hz (servo and scanner boards tick at 1 kHz to a few 100 kHz)"
+    return None
+
+
 def _discrete(v: float) -> str | None:
     if (e := _positive(v)) is not None:
         return e
+    if v < MIN_DISCRETE_MM:
+        return f"{v:g} mm per discrete is finer than {MIN_DISCRETE_MM:g} mm (0.1 nm), below any encoder"
     if v > 0.1:
         return f"{v:g} mm per discrete is coarser than 0.1 mm; did you mean {v / 1000:g} (in mm)?"
     return None
@@ -185,7 +204,7 @@ Check = Callable[[Any], "str | None"] | None
 _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
     "machine": {
         "name": ("string", False, "machine", None),
-        "tick_hz": ("number", True, None, _positive),
+        "tick_hz": ("number", True, None, _tick_rate),
         "discrete_mm": ("number", False, 0.001, _discrete),
         "planner": ("string", False, None, _name),
     },
@@ -336,11 +355,12 @@ class _Loader:
             elif not a["min"] <= a["home"] <= a["max"]:
                 raise self.fail(f"axes.{name}", "home", f"home {a['home']:g} is outside [{a['min']:g}, {a['max']:g}]")
             reach = max(abs(a["min"]), abs(a["max"])) / m["discrete_mm"]
-            if reach > _INT32_MAX:
+            if reach > INT32_SAFE_DISCRETES:
                 raise self.fail(
                     "machine",
                     "discrete_mm",
-                    f"axis {name} travel {reach:.3g} discretes exceeds int32; use a coarser discrete",
+                    f"axis {name} travel reaches {reach:.3g} discretes from 0, beyond 2^30 (half of int32, the "
+                    "margin that keeps table positions from overflowing); use a coarser discrete or a smaller travel",
                 )
             axes.append(AxisConfig(name=name, **a))
         if laser["mode"] == "pulsed" and laser["pulse_hz"] is None:
@@ -353,8 +373,12 @@ class _Loader:
             for n in sc["axes"]:
                 if n not in axes_raw:
                     raise self.fail("scanner", "axes", f"scanner axis {n!r} has no [axes.{n}] table")
-            if len(sc["field_mm"]) != len(sc["axes"]) or any(f <= 0 for f in sc["field_mm"]):
-                raise self.fail("scanner", "field_mm", "needs one positive field size per scanner axis")
+            if len(sc["field_mm"]) != len(sc["axes"]) or not all(math.isfinite(f) and f > 0 for f in sc["field_mm"]):
+                raise self.fail("scanner", "field_mm", "needs one positive, finite field size per scanner axis")
+            if max(sc["field_mm"]) / m["discrete_mm"] > INT32_SAFE_DISCRETES:
+                raise self.fail(
+                    "scanner", "field_mm", f"a field of {max(sc['field_mm']):g} mm spans more than 2^30 discretes"
+                )
             if len(sc["scale"]) != len(sc["axes"]) or not all(math.isfinite(f) and f != 0 for f in sc["scale"]):
                 raise self.fail("scanner", "scale", "needs one finite, non-zero scale per scanner axis")
             if len(sc["offset_mm"]) != len(sc["axes"]) or not all(math.isfinite(f) for f in sc["offset_mm"]):

@@ -351,6 +351,9 @@ class PointJob:
         file: where the points came from.
         index: ``(n,)`` each point's position in its file (0-based); differs from ``arange(n)``
             once the points are re-ordered.
+        allow_repeats: the user asked for repeated burns (``--allow-repeats``): a point given twice is burned
+            twice. Otherwise two points within a quarter discrete of each other, anywhere in the job, are
+            refused when it is planned (:func:`jaxcnc.planners.pulsed.request.check_repeats`).
     """
 
     points: np.ndarray
@@ -358,6 +361,7 @@ class PointJob:
     line: np.ndarray
     file: str
     index: np.ndarray | None = None
+    allow_repeats: bool = False
 
     def __post_init__(self) -> None:
         if self.index is None:
@@ -374,4 +378,5 @@ class PointJob:
             line=self.line[order],
             file=self.file,
             index=self.index[order],
+            allow_repeats=self.allow_repeats,
         )

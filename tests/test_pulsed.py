@@ -75,7 +75,6 @@ def test_point_file_formats():
         ("0 0 0\n1 1\n", 2, "expected 3 numbers"),
         ("0 0 0\n1 one 1\n", 2, "'one' is not a number"),
         ("0 0 0\n1 nan 1\n", 2, "NaN or infinite"),
-        ("0 0 0\n1 1 1\n1 1 1\n", 3, "the same point as line 2"),
         ("0 0 0 1\n1 1 1 -2\n", 2, "negative pulse energy"),
         ("# nothing\n\n", 0, "no points"),
     ],

@@ -78,9 +78,7 @@ def _fmt_axes(d: dict[str, float], unit: str) -> str:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from jaxcnc.jobs import plan_file
-
-    from jaxcnc.jobs import JobBounds
+    from jaxcnc.jobs import JobBounds, plan_file
 
     report = plan_file(
         Path(args.input),

@@ -7,8 +7,10 @@ header (``x,y,z[,energy]``). A G-code program serves as a point file too: the en
 feed move (G1) is a point (:func:`points_from_program`).
 
 Every mistake is an error naming the file, the line and the cause: a wrong number of columns,
-text where a number belongs, a NaN or infinite coordinate, the same point twice in a row (it
-would be burned twice), an empty file.
+text where a number belongs, a NaN or infinite coordinate, an empty file. A point given twice (anywhere in
+the file, within a quarter discrete) would be burned twice: that needs the machine's discrete and is refused
+when the job is planned, naming both lines, unless repeated burns are asked for
+(:func:`jaxcnc.planners.pulsed.request.check_repeats`).
 
 NumPy only: the table checker reads point files too.
 """
@@ -24,8 +26,6 @@ from jaxcnc.errors import SourceError
 from jaxcnc.program import Kind, PointJob
 
 POINT_SUFFIXES = (".xyz", ".csv")
-#: Two consecutive points closer than this (mm) are the same point.
-SAME_POINT_MM = 1e-9
 _SEP = re.compile(r"[,;\s]+")
 
 
@@ -83,17 +83,6 @@ def _validated(points: np.ndarray, energy: np.ndarray | None, line: np.ndarray, 
     if energy is not None and np.any(energy < 0):
         k = int(np.flatnonzero(energy < 0)[0])
         raise SourceError(file, int(line[k]), 0, f"negative pulse energy {energy[k]:g}")
-    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    same = np.flatnonzero(step < SAME_POINT_MM)
-    if same.size:
-        k = int(same[0]) + 1
-        raise SourceError(
-            file,
-            int(line[k]),
-            0,
-            f"the same point as line {int(line[k - 1])} again ({', '.join(f'{c:g}' for c in points[k])}); "
-            "it would be burned twice",
-        )
     for a in (points, line) + ((energy,) if energy is not None else ()):
         a.setflags(write=False)
     return PointJob(points=points, energy=energy, line=line, file=file)

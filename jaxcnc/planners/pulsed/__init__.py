@@ -25,6 +25,7 @@ from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (regis
 from jaxcnc.planners.pulsed.request import (
     PulsePlan,
     PulseRequest,
+    check_repeats,
     get_pulse_planner,
     pulse_planner_names,
     register_pulse_planner,
@@ -79,6 +80,8 @@ def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
             raise SourceError(
                 job.file, int(job.line[k]), 0, f"the point needs axis {axis.upper()}, which {machine.name!r} lacks"
             )
+    if not job.allow_repeats:  # a point given twice is burned twice: only when asked for
+        check_repeats(pts, job.line, job.file, machine.discrete_mm / 4)
     out = outside_travel(pts, pts, machine, tol_mm=0.0)
     if out is not None:
         k, axis, value, ax = out

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxcnc.errors import PlanningError
+from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.planners.pulsed.trajectory import Trajectory
 from jaxcnc.planners.pulsed.windows import PulseWindow
 from jaxcnc.plugins import Registry
@@ -66,6 +66,37 @@ class PulseRequest:
         v_path = np.minimum(v_path, cap_mm_s)
         a_path = np.where(np.isfinite(a_path), a_path, np.max(self.a_max[np.isfinite(self.a_max)], initial=1.0))
         return u, length, v_path, a_path
+
+
+def check_repeats(points: np.ndarray, line: np.ndarray, file: str, tol_mm: float) -> None:
+    """Refuse a point given twice: two points closer than ``tol_mm`` anywhere in ``points`` ``(n, 3)``.
+
+    Each would be burned by its own pulse: the same spot twice. The pairs are found with a k-d tree
+    (:class:`scipy.spatial.cKDTree`, no loop over points), whatever the order, so a job re-ordered by
+    ``--reorder`` is refused as the file is. The error names the later line of the first such pair in file
+    order and the earlier one; the caller skips this when repeated burns were asked for (``--allow-repeats``).
+    ``line``: ``(n,)`` source line of each point.
+    """
+    from scipy.spatial import cKDTree
+
+    if points.shape[0] < 2:
+        return
+    pairs = cKDTree(points).query_pairs(tol_mm, output_type="ndarray")
+    if pairs.size == 0:
+        return
+    a, b = line[pairs[:, 0]], line[pairs[:, 1]]
+    first, second = np.minimum(a, b), np.maximum(a, b)
+    k = int(np.lexsort((first, second))[0])
+    i = int(pairs[k, 0] if a[k] == second[k] else pairs[k, 1])
+    j = int(pairs[k, 1] if a[k] == second[k] else pairs[k, 0])
+    gap_mm = float(np.linalg.norm(points[i] - points[j]))
+    raise SourceError(
+        file,
+        int(second[k]),
+        0,
+        f"the same point as line {int(first[k])} ({', '.join(f'{c:g}' for c in points[i])}; {gap_mm:.3g} mm apart, "
+        f"within a quarter discrete, {tol_mm:g} mm): it would be burned twice; pass --allow-repeats to burn it again",
+    )
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,291 @@
+"""Degenerate programs, job size bounds, machine ranges and repeated pulsed points (issue 14, Deliver 2 and 5).
+
+Each was reproduced on the code before the fix: a feed that underflows planned "10 mm in 0.000 s"; feed 0,
+1e-300 or an arc without a turn direction went through the Python API; ``G1 X10 F0.001`` would have written
+~144 GB and a long dwell tens of GB before anything refused; ``tick_hz = 1e9`` and ``field_mm = [nan]`` were
+accepted; pulsed points repeated apart from each other, or 2 nm apart, or made neighbours by ``--reorder``,
+were burned twice.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jaxcnc.errors import JaxcncError, MachineFileError, SourceError
+from jaxcnc.gcode import parse_gcode
+from jaxcnc.io.points import PointJob
+from jaxcnc.jobs import DEFAULT_BOUNDS, JobBounds, plan_file
+from jaxcnc.machine import parse_machine
+from jaxcnc.planners.pulsed import plan_points
+from jaxcnc.program import MIN_FEED_MM_S, Kind, program_from_columns
+from tests.conftest import machine_text
+from tests.test_pulsed import glass
+
+# ---- feeds, durations and arcs below physical sense ---------------------------------------------------------------
+
+
+def _line(**cols):
+    base = {"kind": [Kind.LINE], "start": [[0.0, 0, 0]], "end": [[10.0, 0, 0]], "line": [7]}
+    return program_from_columns(file="api.ngc", **{**base, **cols})
+
+
+@pytest.mark.parametrize("feed", [0.0, 1e-300, 1e-12, -5.0, np.inf])
+def test_api_feed_below_physical_sense_is_refused(feed):
+    with pytest.raises(SourceError) as info:
+        _line(feed=[feed])
+    assert str(info.value).startswith("api.ngc:7:") and "feed" in info.value.reason
+
+
+def test_api_feed_at_the_floor_and_the_machine_default_pass():
+    assert _line(feed=[MIN_FEED_MM_S]).feed[0] == MIN_FEED_MM_S
+    assert np.isnan(_line().feed[0])  # not set: the machine's feed applies
+
+
+@pytest.mark.parametrize(
+    ("cols", "needle"),
+    [
+        ({"kind": [Kind.ARC], "center": [[5.0, 0, 0]], "turn": [0]}, "turn"),
+        ({"kind": [Kind.ARC], "center": [[np.nan, 0, 0]], "turn": [1]}, "centre"),
+        ({"kind": [Kind.ARC], "center": [[0.0, 0, 0]], "turn": [1]}, "radius"),
+        ({"kind": [Kind.ARC], "center": [[5.0, 0, 0]], "turn": [1], "plane": [16]}, "plane"),
+        ({"kind": [Kind.DWELL], "end": [[0.0, 0, 0]], "dwell_s": [-1.0]}, "dwell"),
+        ({"kind": [Kind.DWELL], "end": [[0.0, 0, 0]], "dwell_s": [np.nan]}, "dwell"),
+        ({"kind": [Kind.DWELL], "end": [[0.0, 0, 0]], "dwell_s": [np.inf]}, "dwell"),
+        ({"end": [[np.inf, 0, 0]]}, "finite"),
+        ({"start": [[np.nan, 0, 0]]}, "finite"),
+        ({"kind": [9]}, "kind"),
+        ({"power": [np.nan]}, "power"),
+        ({"blend_tol": [np.nan]}, "blend"),
+    ],
+)
+def test_api_degenerate_rows_are_refused_naming_the_line(cols, needle):
+    with pytest.raises(SourceError) as info:
+        _line(**cols)
+    assert str(info.value).startswith("api.ngc:7:") and needle in info.value.reason, str(info.value)
+
+
+def test_gcode_feed_that_underflows_is_refused():
+    """The issue's teleport: 10 mm "in 0.000 s = 1 tick". The feed is refused as nonsense, located."""
+    with pytest.raises(SourceError) as info:
+        parse_gcode("G1 X10 F0." + "0" * 300 + "1\n", "t.ngc")
+    assert (info.value.line, info.value.column) == (1, 1) and "feed" in info.value.reason
+
+
+def test_gcode_arc_turns_are_bounded():
+    with pytest.raises(SourceError, match="turns"):
+        parse_gcode("G2 X0 Y0 I1 F100 P1000000000\n", "t.ngc")
+    assert len(parse_gcode("G2 X0 Y0 I1 F100 P3\n", "t.ngc")) == 3
+
+
+# ---- job size bounds ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def machine_file(tmp_path):
+    m = tmp_path / "m.toml"
+    m.write_text(machine_text())
+    return m
+
+
+def _plan(tmp_path, machine_file, text, **kw):
+    prog = tmp_path / "p.ngc"
+    prog.write_text(text)
+    out = tmp_path / "o.ticks"
+    return prog, out, lambda: plan_file(prog, machine_file, out, progress=False, **kw)
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "needle"),
+    [
+        ("G1 X5 F600\nG1 X10 F0.001\n", 2, "max-duration"),  # ~144 GB of table
+        ("G1 X5 F600\nG4 P10000000\n", 2, "max-duration"),  # a dwell of 116 days
+        ("G1 X5 F600\nG4 P" + "9" * 300 + "\n", 2, "max-duration"),
+        ("G1 X10 F0.0001\n", 1, "max-duration"),  # just above the feed floor: refused by the bound
+    ],
+)
+def test_a_job_beyond_the_bounds_is_refused_before_anything_is_written(tmp_path, machine_file, text, line, needle):
+    prog, out, run = _plan(tmp_path, machine_file, text)
+    with pytest.raises(SourceError) as info:
+        run()
+    assert str(info.value).startswith(f"{prog}:{line}:") and needle in info.value.reason, str(info.value)
+    assert not out.exists() and not list(tmp_path.glob("*.part"))
+
+
+@pytest.mark.parametrize(
+    ("bounds", "needle"),
+    [
+        (JobBounds(max_duration_s=5.0), "max-duration"),
+        (JobBounds(max_ticks=50_000), "max-ticks"),
+        (JobBounds(max_bytes=1_000_000), "max-bytes"),
+    ],
+)
+def test_each_bound_refuses_and_raising_it_lets_the_job_through(tmp_path, machine_file, bounds, needle):
+    """10 mm at 1 mm/s: 10 s, 100k ticks, ~2.4 MB; each bound below that refuses, the defaults let it through."""
+    _prog, out, run = _plan(tmp_path, machine_file, "G1 X10 F60\n", bounds=bounds)
+    with pytest.raises(JaxcncError, match=needle):
+        run()
+    assert not out.exists()
+    report = plan_file(tmp_path / "p.ngc", machine_file, out, progress=False, bounds=DEFAULT_BOUNDS)
+    assert report["n_ticks"] > 100_000 and out.exists()
+
+
+def test_the_exact_plan_is_checked_too(tmp_path, machine_file):
+    """The lower bound before planning ignores acceleration; the planned time is checked before writing."""
+    # 40 short moves with exact stops: the lower bound (length / feed) is far below the planned time
+    text = "G61\nG1 F3000\n" + "".join(f"G1 X{(k % 2) * 0.5 + 1:g}\n" for k in range(40))
+    prog, out, run = _plan(tmp_path, machine_file, text)
+    planned = run()["total_time_s"]
+    out.unlink()
+    lower = 40 * 0.5 / 50.0
+    assert planned > 2 * lower
+    with pytest.raises(JaxcncError, match="max-duration") as info:
+        plan_file(prog, machine_file, out, progress=False, bounds=JobBounds(max_duration_s=(lower + planned) / 2))
+    assert "planned" in str(info.value)
+    assert not out.exists()
+
+
+def test_bounds_must_be_positive():
+    for bad in ({"max_ticks": 0}, {"max_bytes": -1}, {"max_duration_s": float("nan")}):
+        with pytest.raises(JaxcncError):
+            JobBounds(**bad)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "jaxcnc", *args], capture_output=True, text=True)
+
+
+def test_cli_bounds_options(tmp_path, machine_file):
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G1 X10 F0.001\n")
+    out = tmp_path / "o.ticks"
+    r = _cli("plan", str(prog), "-m", str(machine_file), "-o", str(out), "-q")
+    assert r.returncode == 2 and len(r.stderr.splitlines()) == 1, r.stderr
+    assert r.stderr.startswith(f"jaxcnc: error: {prog}:1:") and "--max-duration" in r.stderr
+    assert not out.exists()
+    prog.write_text("G1 X10 F60\n")
+    for opt, value in (("--max-duration", "5s"), ("--max-ticks", "50000"), ("--max-bytes", "1M")):
+        r = _cli("plan", str(prog), "-m", str(machine_file), "-o", str(out), "-q", opt, value)
+        assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and opt in r.stderr, r.stderr
+        assert not out.exists()
+    r = _cli("plan", str(prog), "-m", str(machine_file), "-o", str(out), "-q", "--max-duration", "1h")
+    assert r.returncode == 0, r.stderr
+    r = _cli("plan", str(prog), "-m", str(machine_file), "-o", str(out), "--max-bytes", "lots")
+    assert r.returncode == 2 and "--max-bytes" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_help_states_the_defaults():
+    r = _cli("plan", "--help")
+    text = " ".join(r.stdout.split())
+    assert "--max-ticks" in text and "--max-bytes" in text and "--max-duration" in text
+    assert f"{DEFAULT_BOUNDS.max_ticks:,}" in text or str(DEFAULT_BOUNDS.max_ticks) in text
+    assert "24 h" in text and "32 GiB" in text and "--allow-repeats" in text
+
+
+# ---- machine ranges ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key"),
+    [
+        ("tick_hz = 10000", "tick_hz = 1e9", "machine.tick_hz"),
+        ("tick_hz = 10000", "tick_hz = 0.5", "machine.tick_hz"),
+        ("discrete_mm = 0.001", "discrete_mm = 1e-12", "machine.discrete_mm"),
+        # 500 mm of travel in 0.3 nm discretes is 1.7e9 discretes: within int32 but without its margin of two
+        ("discrete_mm = 0.001", "discrete_mm = 0.0000003", "machine.discrete_mm"),
+        ("min = -500.0", "min = -1.5e6", "machine.discrete_mm"),
+    ],
+)
+def test_machine_ranges_keep_int32_positions_safe(old, new, key):
+    text = machine_text().replace(old, new, 1)
+    assert new in text
+    with pytest.raises(MachineFileError) as info:
+        parse_machine(text, "m.toml")
+    assert info.value.key == key and info.value.line > 0, str(info.value)
+
+
+@pytest.mark.parametrize("field", ["[nan]", "[inf]", "[-1.0]", "[0.0]", "[1e9]"])
+def test_scanner_field_must_be_finite_positive_and_in_range(field):
+    text = machine_text() + f'[scanner]\naxes = ["x"]\nfield_mm = {field}\n'
+    with pytest.raises(MachineFileError) as info:
+        parse_machine(text, "m.toml")
+    assert info.value.key == "scanner.field_mm"
+
+
+def test_a_fine_machine_still_loads():
+    m = parse_machine(machine_text().replace("discrete_mm = 0.001", "discrete_mm = 0.00001"), "m.toml")
+    assert m.discrete_mm == 1e-5
+    assert parse_machine(machine_text().replace("tick_hz = 10000", "tick_hz = 1000000")).tick_hz == 1e6
+
+
+# ---- pulsed jobs: no point burned twice -------------------------------------------------------------------------
+
+
+def _job(points, lines=None) -> PointJob:
+    pts = np.asarray(points, dtype=np.float64)
+    return PointJob(pts, None, np.arange(1, len(pts) + 1) if lines is None else np.asarray(lines), "pts.xyz")
+
+
+@pytest.mark.parametrize(
+    ("points", "first", "second"),
+    [
+        ([[10, 10, 10], [11, 10, 10], [12, 10, 10], [10, 10, 10]], 1, 4),  # not consecutive
+        ([[10, 10, 10], [11, 10, 10], [11, 10, 10]], 2, 3),  # consecutive (moved here from the point-file parser)
+        ([[10, 10, 10], [11, 10, 10], [11.000002, 10, 10]], 2, 3),  # 2 nm apart
+        ([[10, 10, 10], [11, 10, 10], [12, 10, 10], [11, 10.0002, 10]], 2, 4),  # within a quarter discrete
+    ],
+)
+def test_repeated_points_are_refused_with_both_lines(points, first, second):
+    with pytest.raises(SourceError) as info:
+        plan_points(_job(points), glass(), "stop-and-go")
+    e = info.value
+    assert e.line == second and f"line {first}" in e.reason and "--allow-repeats" in e.reason, str(e)
+
+
+def test_points_a_third_discrete_apart_are_distinct():
+    job = _job([[10, 10, 10], [11, 10, 10], [12, 10, 10], [11, 10.0003, 10]])
+    assert len(plan_points(job, glass(), "stop-and-go").plan.work_tick) == 4
+
+
+def test_repeats_on_request_are_burned_each_time():
+    job = _job([[10, 10, 10], [11, 10, 10], [12, 10, 10], [10, 10, 10]])
+    job = PointJob(job.points, None, job.line, job.file, allow_repeats=True)
+    assert len(plan_points(job, glass(), "stop-and-go").plan.work_tick) == 4
+    assert job.take(np.array([3, 2, 1, 0])).allow_repeats
+
+
+def _pulsed_files(tmp_path, text):
+    m = tmp_path / "glass.toml"
+    m.write_text(
+        "[machine]\nname = 'glass'\ntick_hz = 10000\n"
+        + "".join(f"[axes.{a}]\nv_max = 50.0\na_max = 300.0\nmin = 0.0\nmax = 300.0\n" for a in "xyz")
+        + "[path]\nfeed = 30.0\nrapid = 50.0\n[laser]\nmode = 'pulsed'\npulse_hz = 40.0\ntolerance = 0.05\n"
+    )
+    pts = tmp_path / "pts.xyz"
+    pts.write_text(text)
+    return m, pts
+
+
+@pytest.mark.parametrize("reorder", [False, True])
+def test_cli_refuses_repeats_before_and_after_reorder_and_allows_them_on_request(tmp_path, reorder):
+    # lines 1 and 3 are the same point; --reorder would make them neighbours
+    m, pts = _pulsed_files(tmp_path, "10 10 10\n12 10 10\n10 10 10\n11 10 10\n")
+    out = tmp_path / "o.ticks"
+    more = ["--reorder"] if reorder else []
+    r = _cli("plan", str(pts), "-m", str(m), "-o", str(out), "-q", "--planner", "stop-and-go", *more)
+    assert r.returncode == 2 and len(r.stderr.splitlines()) == 1, r.stderr
+    assert f"{pts}:3:" in r.stderr and "line 1" in r.stderr and "--allow-repeats" in r.stderr
+    assert not out.exists()
+    report = tmp_path / "r.json"
+    r = _cli(
+        "plan", str(pts), "-m", str(m), "-o", str(out), "-q", "--planner", "stop-and-go", "--allow-repeats",
+        "-r", str(report), *more,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads(report.read_text())["n_points"] == 4
+    r = _cli("check", str(out), "-m", str(m))
+    assert r.returncode == 0, r.stdout + r.stderr
