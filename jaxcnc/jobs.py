@@ -81,7 +81,7 @@ def _fmt_bytes(n: float) -> str:
 
 
 def _fmt_s(t: float) -> str:
-    if t >= 86400:
+    if t >= 2 * 86400:
         return f"{t:.4g} s ({t / 86400:.3g} days)"
     if t >= 3600:
         return f"{t:.4g} s ({t / 3600:.3g} h)"
