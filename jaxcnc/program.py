@@ -336,6 +336,23 @@ def program_from_columns(file: str = "<memory>", curves: CurveTable | None = Non
     return Program(file=file, curves=curves, **out)
 
 
+def program_from_rows(
+    file: str, rows: dict[str, list], curves: CurveTable | None = None, **cols: np.ndarray
+) -> Program:
+    """A Program from a front end's per-row lists (``rows``: column name -> one entry per row; ``start``,
+    ``end`` and ``center`` entries are 3-vectors) plus whole ``cols``; the motion stops wherever the laser
+    is switched (it is switched at rest)."""
+    n = len(rows["kind"])
+    arrays = {
+        k: np.asarray(v).reshape(n, 3) if k in ("start", "end", "center") else np.asarray(v) for k, v in rows.items()
+    }
+    arrays.update(cols)
+    lit = np.asarray(arrays["laser"]) != LaserMode.OFF
+    stop = np.zeros(n, bool)
+    stop[1:] = lit[1:] != lit[:-1]
+    return program_from_columns(file=file, curves=curves, stop_before=stop, **arrays)
+
+
 #: The per-row columns of a :class:`Program`, in field order.
 PROGRAM_COLUMNS = tuple(f.name for f in fields(Program) if f.name not in ("file", "curves"))
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import SourceError
-from jaxcnc.program import Kind, LaserMode, Program, make_curve_table, program_from_columns
+from jaxcnc.program import Kind, LaserMode, Program, make_curve_table, program_from_rows
 
 Curve = tuple[int, np.ndarray, np.ndarray, np.ndarray]
 
@@ -55,24 +55,7 @@ def curves_program(
         if np.any(pts[0] != pos):
             add(Kind.LINE, pts[0].copy(), rapid=True)
         add(Kind.CURVE, pts[-1].copy(), feed=feed_mm_s, curve=i)
-    n = len(rows["kind"])
-    stop = np.zeros(n, bool)
-    lit = np.asarray(rows["laser"]) != LaserMode.OFF
-    stop[1:] = lit[1:] != lit[:-1]  # the laser is switched at rest
-    return program_from_columns(
-        file=file,
-        curves=table,
-        kind=np.asarray(rows["kind"]),
-        start=np.asarray(rows["start"]).reshape(n, 3),
-        end=np.asarray(rows["end"]).reshape(n, 3),
-        rapid=np.asarray(rows["rapid"]),
-        feed=np.asarray(rows["feed"]),
-        curve=np.asarray(rows["curve"]),
-        laser=np.asarray(rows["laser"]),
-        power=np.asarray(rows["power"]),
-        stop_before=stop,
-        line=np.arange(1, n + 1),
-    )
+    return program_from_rows(file, rows, table, line=np.arange(1, len(rows["kind"]) + 1))
 
 
 def read_curves_json(path: str | Path) -> list[Curve]:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from jaxcnc.errors import SourceError
-from jaxcnc.program import Kind, LaserMode, Program, make_curve_table, program_from_columns
+from jaxcnc.program import Kind, LaserMode, Program, make_curve_table, program_from_rows
 
 Curve = tuple[int, np.ndarray, np.ndarray, np.ndarray]
 #: Two chain ends closer than this (mm) are joined without a bridging cut.
@@ -489,23 +489,4 @@ def _program(
                 add(Kind.CURVE, p.end, p.number, curve=len(curves) - 1)
         if c.closed and np.linalg.norm(c.pieces[0].start - pos[:2]) > SNAP_MM:
             add(Kind.LINE, c.pieces[0].start, c.pieces[-1].number)
-    n = len(rows["kind"])
-    lit = np.asarray(rows["laser"]) != LaserMode.OFF
-    stop = np.zeros(n, bool)
-    stop[1:] = lit[1:] != lit[:-1]  # the laser is switched at rest
-    return program_from_columns(
-        file=file,
-        curves=make_curve_table(curves) if curves else None,
-        kind=np.asarray(rows["kind"]),
-        start=np.asarray(rows["start"]).reshape(n, 3),
-        end=np.asarray(rows["end"]).reshape(n, 3),
-        center=np.asarray(rows["center"]).reshape(n, 3),
-        turn=np.asarray(rows["turn"]),
-        rapid=np.asarray(rows["rapid"]),
-        feed=np.asarray(rows["feed"]),
-        curve=np.asarray(rows["curve"]),
-        laser=np.asarray(rows["laser"]),
-        power=np.asarray(rows["power"]),
-        stop_before=stop,
-        line=np.asarray(rows["line"]),
-    )
+    return program_from_rows(file, rows, make_curve_table(curves) if curves else None)
