@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from jaxcnc.errors import JaxcncError, SourceError
-from jaxcnc.front_ends import FRONT_ENDS, GCODE_SUFFIXES, POINT_SUFFIXES, front_end_for  # noqa: F401  (part of this API)
+from jaxcnc.front_ends import GCODE_SUFFIXES, POINT_SUFFIXES, front_end_for  # noqa: F401  (part of this API)
 from jaxcnc.machine import MachineConfig, load_machine
 from jaxcnc.program import PointJob, Program
 
@@ -587,7 +587,10 @@ def program_for_table(
     if not source:
         return None, "the table names no source program; pass --program FILE"
     src = Path(source)
-    fe = FRONT_ENDS.get(src.suffix.lower()[1:]) if src.suffix.lower()[1:] in FRONT_ENDS else None
+    try:
+        fe = front_end_for(src)
+    except JaxcncError:  # no front end reads it
+        fe = None
     if fe is None or fe.produces != "program":
         return None, f"its source {source!r} is not a program (G-code or a drawing)"
     if not src.is_file() and not src.is_absolute() and (table.path.parent / src).is_file():

@@ -249,7 +249,7 @@ class Receiver:
             self.owner, self.last_owner_frame = peer, now
             return Reply(self.reply(WELCOME, nonce=f.nonce), owner=True)
         if self.state == "pending" and now - self.opened_at > HANDSHAKE_S and self.n_rows is None:
-            self.session, self.state = None, "idle"  # a WELCOME nobody answered: the session lapses
+            self._lapse()  # a WELCOME nobody answered
         if self.state == "pending" and peer == self.owner and f.nonce == self.nonce:
             return Reply(self.reply(WELCOME, nonce=f.nonce), owner=True)  # the same HELLO again (UDP)
         if self.state == "pending":
@@ -284,9 +284,12 @@ class Receiver:
     def owner_gone(self, peer) -> None:
         """``peer``'s connection closed. If it owns a session it opened but never used, the session
         lapses at once (nothing moved, nothing is lost); a used one stays, for the player to resume."""
-        unused = self.state == "pending" and self.n_rows is None and self.executed < 0 and not self.queued
-        if peer == self.owner and unused:
-            self.session, self.state, self.owner = None, "idle", None
+        if peer == self.owner and self.state == "pending":  # pending: no frame of the owner since WELCOME
+            self._lapse()
+
+    def _lapse(self) -> None:
+        """The session ends before anything of it was taken: the receiver is idle again."""
+        self.session, self.state, self.owner = None, "idle", None
 
     def _data(self, f: Frame) -> None:
         if self.ended or self.stopped or f.n_axes != self.n_axes:
