@@ -119,14 +119,24 @@ class DxfFrontEnd(FrontEnd):
         return self.drawing(path, machine, **options).program
 
     def drawing(self, path: Path, machine: MachineConfig, **options: Any):
-        """The :class:`~jaxcnc.io.drawing.Drawing` (Program, contours, notes)."""
+        """The :class:`~jaxcnc.io.drawing.Drawing` (Program, contours, notes); a bad option value is a
+        one-line error naming it."""
         from jaxcnc.io.drawing import DrawingOptions
-        from jaxcnc.io.dxf import read_dxf
         from jaxcnc.program import program_start
 
         self.refuse_options(path, options)
-        given = {k: v for k, v in options.items() if v is not None}
-        return read_dxf(path, program_start(machine), DrawingOptions(**given))
+        try:
+            opts = DrawingOptions(**{k: v for k, v in options.items() if v is not None})
+        except ValueError as exc:
+            raise JaxcncError(f"{path}: {exc}") from None
+        return self.read(path, program_start(machine), opts)
+
+    @staticmethod
+    def read(path: Path, start_mm, options):
+        """The drawing in ``path`` read with ``options`` (:func:`jaxcnc.io.dxf.read_dxf`)."""
+        from jaxcnc.io.dxf import read_dxf
+
+        return read_dxf(path, start_mm, options)
 
 
 class HpglFrontEnd(DxfFrontEnd):
@@ -136,14 +146,12 @@ class HpglFrontEnd(DxfFrontEnd):
     name = "HP-GL plot file"
     options = ("allow_open", "tol_mm", "feed_mm_s", "power", "lead_in_mm")
 
-    def drawing(self, path: Path, machine: MachineConfig, **options: Any):
-        from jaxcnc.io.drawing import DrawingOptions
+    @staticmethod
+    def read(path: Path, start_mm, options):
+        """The plot in ``path`` read with ``options`` (:func:`jaxcnc.io.hpgl.read_hpgl`)."""
         from jaxcnc.io.hpgl import read_hpgl
-        from jaxcnc.program import program_start
 
-        self.refuse_options(path, options)
-        given = {k: v for k, v in options.items() if v is not None}
-        return read_hpgl(path, program_start(machine), DrawingOptions(**given))
+        return read_hpgl(path, start_mm, options)
 
 
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")

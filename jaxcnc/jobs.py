@@ -17,10 +17,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -224,14 +225,31 @@ def _machine(machine: MachineConfig | str | Path) -> MachineConfig:
     return machine if isinstance(machine, MachineConfig) else load_machine(machine)
 
 
-def load_program(path: str | Path, machine: MachineConfig, dialect: str | None = None) -> Program:
+def source_options(dialect: str | None = None, input_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The options a front end reads its input with (``dialect`` is one of them), those set only. Tables record
+    them (header ``source_options``) so that ``check`` reads the source again as it was planned."""
+    given = {k: v for k, v in (input_options or {}).items() if v is not None}
+    if dialect is not None:
+        given["dialect"] = dialect
+    return given
+
+
+def load_program(
+    path: str | Path,
+    machine: MachineConfig,
+    dialect: str | None = None,
+    input_options: Mapping[str, Any] | None = None,
+) -> Program:
     """The contour program in ``path`` (G-code, or any front end that produces a
-    :class:`~jaxcnc.program.Program`), starting where the machine is homed."""
+    :class:`~jaxcnc.program.Program`), starting where the machine is homed.
+
+    ``input_options``: the front end's options (drawings: :class:`~jaxcnc.io.drawing.DrawingOptions` fields such
+    as ``allow_open`` or ``lead_in_mm``); one the front end does not take is an error."""
     path = Path(path)
     fe = front_end_for(path)
     if fe.produces != "program":
         raise JaxcncError(f"{path}: a {fe.name} holds points, not a program; it is planned as a point job")
-    return fe.load(path, machine, dialect=dialect)
+    return fe.load(path, machine, **source_options(dialect, input_options))
 
 
 def is_point_job(input_path: str | Path, machine: MachineConfig) -> bool:
@@ -240,7 +258,11 @@ def is_point_job(input_path: str | Path, machine: MachineConfig) -> bool:
 
 
 def load_point_job(
-    input_path: str | Path, machine: MachineConfig, dialect: str | None = None, allow_repeats: bool = False
+    input_path: str | Path,
+    machine: MachineConfig,
+    dialect: str | None = None,
+    allow_repeats: bool = False,
+    input_options: Mapping[str, Any] | None = None,
 ) -> PointJob:
     """The points of a point job: read from a point file, or the G1 end points of a program.
 
@@ -251,10 +273,11 @@ def load_point_job(
 
     input_path = Path(input_path)
     fe = front_end_for(input_path)
+    options = source_options(dialect, input_options)
     if fe.produces == "points":
-        job = fe.load(input_path, machine, dialect=dialect)
+        job = fe.load(input_path, machine, **options)
     else:
-        job = points_from_program(fe.load(input_path, machine, dialect=dialect))
+        job = points_from_program(fe.load(input_path, machine, **options))
     return dataclasses.replace(job, allow_repeats=True) if allow_repeats else job
 
 
@@ -271,8 +294,11 @@ def plan_file(
     split_plot: str | Path | None = None,
     bounds: JobBounds = DEFAULT_BOUNDS,
     allow_repeats: bool = False,
+    input_options: Mapping[str, Any] | None = None,
 ) -> dict:
     """Plan ``input_path`` on the machine, write and verify the table at ``out``; the report dict.
+
+    ``input_options``: the front end's options (:func:`load_program`), recorded in the table's header.
 
     On a machine with a ``[scanner]`` a contour job is split between stage and scanner (``split``: ``own``
     by default, ``seed``, or ``none`` for the stage alone; :func:`plan_split_file`). ``bounds``: how large the
@@ -284,7 +310,16 @@ def plan_file(
         if split not in (None, "none"):
             raise JaxcncError("--split applies to contour jobs, not point-by-point pulsed ones")
         return plan_points_file(
-            input_path, machine, out, planner, progress, dialect, reorder, bounds=bounds, allow_repeats=allow_repeats
+            input_path,
+            machine,
+            out,
+            planner,
+            progress,
+            dialect,
+            reorder,
+            bounds=bounds,
+            allow_repeats=allow_repeats,
+            input_options=input_options,
         )
     if allow_repeats:
         raise JaxcncError("--allow-repeats applies to point-by-point jobs (point files or pulsed machines)")
@@ -295,11 +330,22 @@ def plan_file(
             raise JaxcncError(f"--split {split}: machine {machine.name!r} has no [scanner] section")
     if machine.scanner is not None and split != "none":
         return plan_split_file(
-            input_path, machine, out, split or "own", progress, dialect, kinematics, split_plot, bounds=bounds
+            input_path,
+            machine,
+            out,
+            split or "own",
+            progress,
+            dialect,
+            kinematics,
+            split_plot,
+            bounds=bounds,
+            input_options=input_options,
         )
     if kinematics or split_plot:
         raise JaxcncError("--kinematics and --split-plot belong to stage + scanner split jobs")
-    return plan_program_file(input_path, machine, out, planner, progress, dialect, bounds=bounds)
+    return plan_program_file(
+        input_path, machine, out, planner, progress, dialect, bounds=bounds, input_options=input_options
+    )
 
 
 def plan_split_file(
@@ -312,6 +358,7 @@ def plan_split_file(
     kinematics: str | Path | None = None,
     split_plot: str | Path | None = None,
     bounds: JobBounds = DEFAULT_BOUNDS,
+    input_options: Mapping[str, Any] | None = None,
 ) -> dict:
     """Split a contour job between stage and scanner (:mod:`jaxcnc.planners.split`), write and check its
     table (every axis' limits, the field, the tool point); the per-tick CSV and the picture on request."""
@@ -321,15 +368,16 @@ def plan_split_file(
     from jaxcnc.ticks.verify import measure_table
 
     st = Stages(progress, f"splitting {Path(input_path).name}")
+    options = source_options(dialect, input_options)
     try:
         with st.stage("parse"):
-            program = load_program(input_path, machine, dialect)
+            program = load_program(input_path, machine, input_options=options)
             check_program_bounds(program, machine, bounds)
         with st.stage("plan"):
             plan = plan_split(program, machine, method)
             check_planned_bounds(str(input_path), plan.n_ticks, plan.total_time_s, machine, bounds)
         with st.stage("ticks"):
-            write_split_table(plan, program, machine, out)
+            write_split_table(plan, program, machine, out, source_options=options)
         with st.stage("verify"):
             table = TableFile(out)
             meas = measure_table(table, machine)
@@ -384,8 +432,9 @@ def plan_program_file(
     progress: bool | None = None,
     dialect: str | None = None,
     bounds: JobBounds = DEFAULT_BOUNDS,
+    input_options: Mapping[str, Any] | None = None,
 ) -> dict:
-    """Plan a contour program (G-code), write its table and verify it (limits, the path); the report.
+    """Plan a contour program (G-code, a drawing), write its table and verify it (limits, the path); the report.
 
     ``bounds``: refused before anything is planned or written when the table would exceed them."""
     from jaxcnc.jaxconfig import configure_jax
@@ -400,15 +449,16 @@ def plan_program_file(
 
     planner = planner or machine_planner(machine)
     st = Stages(progress, f"planning {Path(input_path).name}")
+    options = source_options(dialect, input_options)
     try:
         with st.stage("parse"):
-            program = load_program(input_path, machine, dialect)
+            program = load_program(input_path, machine, input_options=options)
             check_program_bounds(program, machine, bounds)
         with st.stage("plan"):
             job = plan_job(program, machine, planner=planner)
             check_planned_bounds(str(input_path), job.plan.n_ticks + 1, job.plan.total_time_s, machine, bounds)
         with st.stage("ticks"):
-            write_table(job, out, progress=progress, planner=planner)
+            write_table(job, out, progress=progress, planner=planner, source_options=options)
         with st.stage("verify"):
             table = TableFile(out)
             meas = measure_table(table, machine)
@@ -447,6 +497,7 @@ def plan_points_file(
     reorder: bool = False,
     bounds: JobBounds = DEFAULT_BOUNDS,
     allow_repeats: bool = False,
+    input_options: Mapping[str, Any] | None = None,
 ) -> dict:
     """Plan a point-by-point pulsed job, write its table and verify it; the report (with the comparisons).
 
@@ -466,7 +517,8 @@ def plan_points_file(
     st = Stages(progress, f"planning {Path(input_path).name}")
     try:
         with st.stage("parse"):
-            given = load_point_job(input_path, machine, dialect, allow_repeats)
+            options = source_options(dialect, input_options)
+            given = load_point_job(input_path, machine, allow_repeats=allow_repeats, input_options=options)
             _check_points_bounds(given, machine, bounds)
         with st.stage("plan"):
             job = given.take(serpentine_order(given.points)) if reorder else given
@@ -474,7 +526,7 @@ def plan_points_file(
             traj = planned.plan.trajectory
             check_planned_bounds(str(input_path), traj.n_ticks + 1, traj.total_time_s, machine, bounds)
         with st.stage("ticks"):
-            write_pulse_table(planned, out, progress=progress)
+            write_pulse_table(planned, out, progress=progress, source_options=options)
         with st.stage("verify"):
             table = TableFile(out)
             meas = measure_table(table, machine)
@@ -558,6 +610,15 @@ def check_table(
     return table, meas
 
 
+def recorded_options(table: TableFile, dialect: str | None = None) -> dict[str, Any]:
+    """The options the table's source was read with (header ``source_options``), ``dialect`` (given on the
+    command line) in place of the recorded one. A header whose record is not a table of options is refused."""
+    recorded = table.header.meta.get("source_options", {})
+    if not isinstance(recorded, dict) or not all(isinstance(k, str) for k in recorded):
+        raise JaxcncError(f"{table.path}: header source_options = {recorded!r}: must be a table of named options")
+    return source_options(dialect, recorded)
+
+
 def program_for_table(
     table: TableFile,
     machine: MachineConfig,
@@ -578,10 +639,11 @@ def program_for_table(
 
     if not np.any(table.events["kind"] == EventKind.BLOCK):
         return None, "the table has no block events (a point job?): nothing ties its ticks to program rows"
+    options = recorded_options(table, dialect)
     if program is not None:
         if not Path(program).is_file():
             raise JaxcncError(f"{program}: no such program file")
-        return load_program(program, machine, dialect), ""
+        return load_program(program, machine, input_options=options), ""
     meta = table.header.meta
     source = str(meta.get("source", ""))
     if not source:
@@ -601,7 +663,7 @@ def program_for_table(
     if want and file_sha256(src) != want:
         return None, f"{source} changed since the table was planned (checksum differs); pass --program FILE"
     try:
-        return fe.load(src, machine, dialect=dialect), ""
+        return fe.load(src, machine, **options), ""
     except SourceError as exc:
         return None, f"its source cannot be read ({exc}); pass --dialect or --program"
 
@@ -619,4 +681,5 @@ def points_of_table(table, machine: MachineConfig, points: str | Path | None):
     if points is None and meta.get("source_sha256"):
         if file_sha256(source) != meta["source_sha256"]:
             raise JaxcncError(f"{source}: changed since the table was planned (checksum differs); pass --points FILE")
-    return load_point_job(source, machine, allow_repeats=True)  # the check verifies what was planned
+    # the check verifies what was planned: repeats as planned, the source read as it was
+    return load_point_job(source, machine, allow_repeats=True, input_options=recorded_options(table))

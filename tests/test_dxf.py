@@ -302,3 +302,53 @@ def test_cli_plans_checks_and_refuses(tmp_path, capsys):
     assert main(["plan", str(bad), "-m", str(machine), "-o", str(tmp_path / "b.ticks"), "-q"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"jaxcnc: error: {bad}:") and "contours cross or touch" in err and "\n" not in err
+
+
+def test_cli_drawing_options_reach_the_plan_and_the_check(tmp_path, capsys):
+    """--allow-open, --lead-in, --feed, --layers on the command line; `check` reads the drawing again with the
+    options the header records (without them the lead-ins would not be in the program it compares with)."""
+    from jaxcnc.cli.main import main
+
+    machine = tmp_path / "m.toml"
+    machine.write_text(machine_text(tick_hz=1000, v=200.0, a=2000.0, rapid=200.0))
+    doc = ezdxf.new(units=4)
+    msp = doc.modelspace()
+    square(msp, 0, 0, 40, layer="CUT")
+    msp.add_circle((20, 20), 4, dxfattribs={"layer": "CUT"})
+    msp.add_line((50, 0), (60, 5), dxfattribs={"layer": "MARK"})  # open: engraving only
+    part = save(doc, tmp_path, "part.dxf")
+
+    def plan(name: str, *flags: str) -> int:
+        return main(["plan", str(part), "-m", str(machine), "-o", str(tmp_path / name), "-q", *flags])
+
+    assert plan("refused.ticks") == 2
+    assert "open contour" in capsys.readouterr().err
+    assert plan("all.ticks", "--allow-open", "--lead-in", "2", "--feed", "50") == 0
+    meta = TableFile(tmp_path / "all.ticks").header.meta
+    assert meta["source_options"] == {"allow_open": True, "lead_in_mm": 2.0, "feed_mm_s": 50.0}
+    capsys.readouterr()
+    assert main(["check", str(tmp_path / "all.ticks"), "-m", str(machine)]) == 0
+    out = capsys.readouterr().out
+    assert "path: max deviation" in out and "skipped" not in out
+
+    assert plan("cut.ticks", "--layers", "CUT", "--lead-in", "2") == 0  # the open line's layer left out
+    cut = TableFile(tmp_path / "cut.ticks")
+    assert cut.header.meta["source_options"]["layers"] == ["CUT"]
+    assert main(["check", str(tmp_path / "cut.ticks"), "-m", str(machine)]) == 0
+    assert "path: max deviation" in capsys.readouterr().out
+    fast = TableFile(tmp_path / "all.ticks").header.meta["total_time_s"]
+    assert plan("slow.ticks", "--allow-open", "--lead-in", "2", "--feed", "25") == 0
+    assert TableFile(tmp_path / "slow.ticks").header.meta["total_time_s"] > 1.5 * fast  # the feed is used
+
+    capsys.readouterr()
+    assert plan("bad.ticks", "--join-tol", "-1") == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"jaxcnc: error: {part}: option tol_mm = -1.0: must be > 0 and <= 1"
+    gcode = tmp_path / "p.ngc"
+    gcode.write_text("G1 X1 F600\nM2\n")
+    assert main(["plan", str(gcode), "-m", str(machine), "-o", str(tmp_path / "g.ticks"), "--lead-in", "2"]) == 2
+    assert "G-code input takes no option lead_in_mm" in capsys.readouterr().err
+    plt = tmp_path / "p.plt"
+    plt.write_text("IN;SP1;PU0,0;PD400,0,400,400,0,400,0,0;PU;")
+    assert main(["plan", str(plt), "-m", str(machine), "-o", str(tmp_path / "h.ticks"), "--layers", "A"]) == 2
+    assert "HP-GL plot file input takes no option layers" in capsys.readouterr().err

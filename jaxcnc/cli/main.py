@@ -77,6 +77,19 @@ def _fmt_axes(d: dict[str, float], unit: str) -> str:
     return ", ".join(f"{a}={v:.4g}" for a, v in d.items()) + f" {unit}"
 
 
+def _drawing_options(args: argparse.Namespace) -> dict:
+    """The drawing options given on the command line (the front end refuses them for inputs that are not
+    drawings, naming each)."""
+    return {
+        "allow_open": True if args.allow_open else None,
+        "tol_mm": args.join_tol,
+        "feed_mm_s": args.feed,
+        "power": args.power,
+        "lead_in_mm": args.lead_in,
+        "layers": tuple(x.strip() for x in args.layers.split(",")) if args.layers is not None else None,
+    }
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     from jaxcnc.jobs import JobBounds, plan_file
 
@@ -93,6 +106,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         split_plot=args.split_plot,
         bounds=JobBounds(max_ticks=args.max_ticks, max_bytes=args.max_bytes, max_duration_s=args.max_duration),
         allow_repeats=args.allow_repeats,
+        input_options=_drawing_options(args),
     )
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
@@ -528,6 +542,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="machines with a [scanner]: split the contour between stage and scanner: own (default: low-pass "
         "stage path, residual on the scanner), seed (the source documents' chord smoothing), none (stage alone)",
     )
+    g = sp.add_argument_group(
+        "drawings (.dxf, .plt/.hpgl)", "how a drawing becomes a cutting job; the table records them for `check`"
+    )
+    g.add_argument(
+        "--allow-open",
+        action="store_true",
+        help="engrave open and crossing contours as drawn (without it they are refused, naming the entity)",
+    )
+    g.add_argument("--feed", type=float, metavar="MM_S", help="contour speed in mm/s (default: [path] feed)")
+    g.add_argument("--power", type=float, help="laser power scale while cutting, 1 = full (default: 1)")
+    g.add_argument("--lead-in", type=float, metavar="MM", help="a straight lead-in of this length from the scrap side")
+    g.add_argument(
+        "--join-tol",
+        type=float,
+        metavar="MM",
+        help="entity ends closer than this are chained; pieces within it are duplicates (default: 0.01)",
+    )
+    g.add_argument("--layers", metavar="A,B", help="DXF: cut only these layers (default: every visible one)")
     sp.add_argument("--kinematics", help="split jobs: write the per-tick kinematic table here (CSV)")
     sp.add_argument("--split-plot", help="split jobs: draw S, S1, S2 and the field here (PNG)")
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")

@@ -63,6 +63,32 @@ class DrawingOptions:
     chord_tol_mm: float = 0.002
     layers: tuple[str, ...] | None = None
 
+    def __post_init__(self) -> None:
+        """Refuse values no drawing can be cut with (``ValueError`` naming the option)."""
+
+        def number(name: str, low: float, high: float, low_open: bool = False) -> None:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"option {name} = {v!r}: must be a finite number")
+            if v < low or (low_open and v == low) or v > high:
+                side = f"> {low:g}" if low_open else f">= {low:g}"
+                raise ValueError(f"option {name} = {v!r}: must be {side} and <= {high:g}")
+            object.__setattr__(self, name, float(v))
+
+        number("tol_mm", 0.0, 1.0, low_open=True)
+        number("chord_tol_mm", 0.0, 1.0, low_open=True)
+        number("power", 0.0, 1e6)
+        number("lead_in_mm", 0.0, 1e4)
+        if self.feed_mm_s is not None:
+            number("feed_mm_s", 0.0, 1e6, low_open=True)
+        if not isinstance(self.allow_open, bool):
+            raise ValueError(f"option allow_open = {self.allow_open!r}: must be true or false")
+        if self.layers is not None:
+            layers = (self.layers,) if isinstance(self.layers, str) else self.layers
+            if not isinstance(layers, (list, tuple)) or not layers or not all(isinstance(x, str) for x in layers):
+                raise ValueError(f"option layers = {self.layers!r}: must be one or more layer names")
+            object.__setattr__(self, "layers", tuple(layers))
+
 
 @dataclass(frozen=True, eq=False)
 class Piece:

@@ -87,7 +87,8 @@ def _scale(doc, notes: list[str]) -> float:
 def _pieces(doc, options: DrawingOptions, file: str, notes: list[str]) -> list[Piece]:
     scale = _scale(doc, notes)
     msp = doc.modelspace()
-    names = {layer.dxf.name for layer in doc.layers}
+    # the layer table, and layers entities name without a table entry (allowed: CAD programs create them on load)
+    names = {layer.dxf.name for layer in doc.layers} | {e.dxf.get("layer", "0") for e in msp}
     if options.layers is not None:
         missing = [n for n in options.layers if n not in names]
         if missing:

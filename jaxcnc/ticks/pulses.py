@@ -94,9 +94,13 @@ def pulse_events(planned: PlannedPoints) -> np.ndarray:
     return out[np.argsort(out["tick"], kind="stable")]
 
 
-def write_pulse_table(planned: PlannedPoints, path: str | Path, *, progress: bool | None = None) -> Path:
-    """Sample a pulsed plan at the tick rate and write its table file with the pulse events."""
+def write_pulse_table(
+    planned: PlannedPoints, path: str | Path, *, progress: bool | None = None, source_options: dict | None = None
+) -> Path:
+    """Sample a pulsed plan at the tick rate and write its table file with the pulse events (``source_options``
+    as :func:`jaxcnc.ticks.table.write_table` records them)."""
     plan = planned.plan
+    more = {"source_options": dict(source_options)} if source_options else {}
     meta = table_meta(
         planned.machine,
         planned.job.file,
@@ -105,6 +109,7 @@ def write_pulse_table(planned: PlannedPoints, path: str | Path, *, progress: boo
         n_points=len(planned.job),
         pulse_hz=planned.window.pulse_hz,
         pulse_tolerance=planned.window.tolerance,
+        **more,
     )
     sampler = TrajectorySampler(plan.trajectory, planned.machine)
     return write_samples(path, planned.machine, sampler, pulse_events(planned), meta, progress)

@@ -64,8 +64,12 @@ def split_events(plan: SplitPlan, program: Program) -> np.ndarray:
     return ev[np.lexsort((ev["kind"], ev["tick"]))]
 
 
-def write_split_table(plan: SplitPlan, program: Program, machine: MachineConfig, path: str | Path) -> Path:
-    """Write the split plan's table (all axes, BLOCK and LASER events, ``split`` in the header)."""
+def write_split_table(
+    plan: SplitPlan, program: Program, machine: MachineConfig, path: str | Path, source_options: dict | None = None
+) -> Path:
+    """Write the split plan's table (all axes, BLOCK and LASER events, ``split`` in the header; ``source_options``
+    as :func:`jaxcnc.ticks.table.write_table` records them)."""
+    more = {"source_options": dict(source_options)} if source_options else {}
     meta = table_meta(
         machine,
         program.file,
@@ -74,6 +78,7 @@ def write_split_table(plan: SplitPlan, program: Program, machine: MachineConfig,
         n_blocks=program.n_blocks,
         split=plan.method,
         feed_mm_s=plan.feed_mm_s,
+        **more,
     )
     return write_samples(path, machine, _ArraySampler(axis_positions(plan, machine)), split_events(plan, program), meta)
 

@@ -136,11 +136,19 @@ def table_meta(
     }
 
 
-def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = None, planner: str | None = None) -> Path:
+def write_table(
+    job: PlannedJob,
+    path: str | Path,
+    *,
+    progress: bool | None = None,
+    planner: str | None = None,
+    source_options: dict | None = None,
+) -> Path:
     """Sample ``job`` at its tick rate and write the table file at ``path``.
 
     ``progress``: show a progress bar (``None``: only on a terminal). ``planner``: the name the header
-    records (default: the planner that planned ``job``).
+    records (default: the planner that planned ``job``). ``source_options``: the options the source was read
+    with (:func:`jaxcnc.jobs.source_options`), recorded so that ``check`` reads it again the same way.
     """
     planner = planner or job.planner
     m = job.machine
@@ -148,7 +156,8 @@ def write_table(job: PlannedJob, path: str | Path, *, progress: bool | None = No
     if len(job.program):
         home = np.array([m.axis(a).home for a in m.axis_names])
         start = machine_axes(job.program.start[:1], np.asarray(job.axis_source), home)[0]
+    more = {"source_options": dict(source_options)} if source_options else {}
     meta = table_meta(
-        m, job.program.file, planner, job.plan.total_time_s, start_mm=start, n_blocks=job.program.n_blocks
+        m, job.program.file, planner, job.plan.total_time_s, start_mm=start, n_blocks=job.program.n_blocks, **more
     )
     return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress)
