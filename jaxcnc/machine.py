@@ -52,6 +52,9 @@ class AxisConfig:
     min: float  # mm
     max: float  # mm
     home: float  # mm, where the machine stands when a program starts
+    #: Vibration modes ``(f_hz, zeta)`` of the axis (``mode_hz``, ``mode_zeta``): the simulated axis and the
+    #: input shapers of issue 20 (docs/vibration.md). Empty: the axis is taken as rigid.
+    modes: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -215,6 +218,8 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "min": ("number", True, None, _finite),
         "max": ("number", True, None, _finite),
         "home": ("number", False, None, _finite),
+        "mode_hz": ("number_list", False, (), None),
+        "mode_zeta": ("number_list", False, (), None),
     },
     "path": {
         "feed": ("number", True, None, _speed),
@@ -321,6 +326,21 @@ class _Loader:
             return tuple(v)
         return v
 
+    def modes(
+        self, axis: str, f_hz: tuple[float, ...], zeta: tuple[float, ...], tick_hz: float
+    ) -> tuple[tuple[float, float], ...]:
+        """An axis' vibration modes: one damping ratio per frequency, frequencies below half the tick rate."""
+        table = f"axes.{axis}"
+        if len(f_hz) != len(zeta):
+            raise self.fail(table, "mode_zeta", f"{len(zeta)} damping ratios for {len(f_hz)} mode frequencies")
+        for f in f_hz:
+            if not (math.isfinite(f) and 0 < f < tick_hz / 2):
+                raise self.fail(table, "mode_hz", f"{f!r} Hz: a mode must lie in (0, tick_hz / 2 = {tick_hz / 2:g}) Hz")
+        for z in zeta:
+            if not 0 <= z < 1:
+                raise self.fail(table, "mode_zeta", f"{z!r}: a damping ratio must lie in [0, 1) (an oscillating mode)")
+        return tuple(zip(f_hz, zeta, strict=True))
+
     def load(self, doc: Mapping[str, Any]) -> MachineConfig:
         for key in doc:
             if key not in _TOP_LEVEL:
@@ -362,6 +382,7 @@ class _Loader:
                     f"axis {name} travel reaches {reach:.3g} discretes from 0, beyond 2^30 (half of int32, the "
                     "margin that keeps table positions from overflowing); use a coarser discrete or a smaller travel",
                 )
+            a["modes"] = self.modes(name, a.pop("mode_hz"), a.pop("mode_zeta"), m["tick_hz"])
             axes.append(AxisConfig(name=name, **a))
         if laser["mode"] == "pulsed" and laser["pulse_hz"] is None:
             raise self.fail("laser", None, "mode 'pulsed' needs pulse_hz")
