@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -97,6 +99,28 @@ def test_own_split_holds_every_limit_field_and_the_contour(tmp_path, extra):
     head = csv.read_text().splitlines()[0].split(",")
     assert head[:5] == ["time_s", "x_mm", "y_mm", "p_mm", "q_mm"] and "abig_mm_s2" in head
     assert plot_split(plan, m, tmp_path / "s.png").stat().st_size > 1000
+
+
+def test_stage_jerk_limit_widens_the_filter_and_holds_at_every_tick(tmp_path):
+    """With j_max on the stage the two averages are ≥ 2·√(F/j) wide (filter_ticks): the jerk measured by the
+    check obeys it; without the limit the same part's stage jerk is above it (the limit binds)."""
+    free = machine()
+    j = 2e5
+    limited = parse_machine(
+        MACHINE.format(field=20.0, extra="").replace("a_max = 4903.325\n", f"a_max = 4903.325\nj_max = {j:g}\n"),
+        "jerk.toml",
+    )
+    assert limited.axis("x").j_max == j and limited.axis("u").j_max is None
+    prog = part(limited)
+    plan = plan_split(prog, limited)
+    assert plan.stats["filter_ticks"] >= math.ceil(2 * math.sqrt(plan.feed_mm_s / j) * limited.tick_hz)
+    table = TableFile(write_split_table(plan, prog, limited, tmp_path / "j.ticks"))
+    meas = measure_table(table, limited)
+    assert meas.violations == []
+    assert max(meas.max_abs_j["x"], meas.max_abs_j["y"]) <= j
+    assert check_split(table, limited, prog).violations == []
+    loose = plan_split(part(free), free)
+    assert loose.stats["max_stage_jerk_mm_s3"] > j > plan.stats["max_stage_jerk_mm_s3"]
 
 
 def test_a_field_too_small_names_the_place_and_the_speed_that_fits():

@@ -13,7 +13,8 @@ Methods (``method``):
   ``T = 2 F / a_stage`` of the tool path (the job planned ahead, so the filter need not be causal). Why:
   the tool's velocity has constant length ``F``, so a moving average of width ``T`` has acceleration
   ``(v(t + T/2) − v(t − T/2)) / T``, at most ``2F / T = a_stage`` — a proof, not a tuning, and it holds
-  per axis; the second average keeps the acceleration continuous (bounded jerk) without raising it; the
+  per axis; the second average keeps the acceleration continuous (jerk at most ``4F/T²``) without raising
+  it, so a stage with a jerk limit widens ``T`` to ``2·√(F/j)`` where that is wider (:func:`filter_ticks`); the
   stage speed is at most ``F``. The residual ``S − S1`` is at most ``F·T = 2F²/a_stage`` in length (far
   less on most paths) and is measured at every tick against the field; if it leaves the field the plan is
   refused with the place and the highest contour speed that fits (found by iterating ``F ← F·√(h/r)``,
@@ -169,21 +170,51 @@ def first_difference(x: np.ndarray, dt: float) -> np.ndarray:
     return v
 
 
-def _stage_limits(machine: MachineConfig) -> tuple[float, float]:
+def third_difference(x: np.ndarray, dt: float) -> np.ndarray:
+    """``(n, d)`` jerks by backward differences over four ticks, as the check measures them (0 before)."""
+    j = np.zeros_like(x)
+    j[3:] = (x[3:] - 3 * x[2:-1] + 3 * x[1:-2] - x[:-3]) / dt**3
+    return j
+
+
+def _stage_limits(machine: MachineConfig) -> tuple[float, float, float | None]:
+    """The stage's speed, acceleration and jerk (``None``: not limited), the slower of x and y, below the margin."""
     x, y = machine.axis("x"), machine.axis("y")
-    return min(x.v_max, y.v_max) * (1 - MARGIN), min(x.a_max, y.a_max) * (1 - MARGIN)
+    jerks = [j for j in (x.j_max, y.j_max) if j is not None]
+    j_stage = min(jerks) * (1 - MARGIN) if jerks else None
+    return min(x.v_max, y.v_max) * (1 - MARGIN), min(x.a_max, y.a_max) * (1 - MARGIN), j_stage
 
 
-def lowpass_split(tool: np.ndarray, feed_mm_s: float, a_stage: float, dt: float) -> tuple[np.ndarray, int]:
+def filter_ticks(feed_mm_s: float, a_stage: float, j_stage: float | None, dt: float) -> int:
+    """The odd width ``w`` (ticks) of the stage's two moving averages.
+
+    One average of width ``T`` over a path run at constant speed ``F`` has acceleration
+    ``(v(t + T/2) − v(t − T/2)) / T``, at most ``2F/T``; the second average does not raise it, so
+    ``T ≥ 2F/a`` keeps the acceleration. The second average's jerk is ``(a₁(t + T/2) − a₁(t − T/2)) / T``
+    with ``|a₁| ≤ 2F/T``: at most ``4F/T²``, so ``T ≥ 2·√(F/j)`` keeps the jerk too.
+    """
+    t_s = 2 * feed_mm_s / a_stage
+    if j_stage is not None:
+        t_s = max(t_s, 2 * math.sqrt(feed_mm_s / j_stage))
+    w = int(math.ceil(t_s / dt))
+    return w + 1 - w % 2
+
+
+def lowpass_split(
+    tool: np.ndarray, feed_mm_s: float, a_stage: float, dt: float, j_stage: float | None = None
+) -> tuple[np.ndarray, int]:
     """``(S1 (n + 2(w−1), 2), w)``: the tool path held ``w − 1`` ticks at each end, twice averaged over ``w``
-    ticks, ``w`` odd ≥ ``2F/(a dt)`` (module docstring), widened until the measured acceleration obeys."""
-    w = int(math.ceil(2 * feed_mm_s / (a_stage * dt)))
-    w += 1 - w % 2
+    ticks (:func:`filter_ticks`), widened until the acceleration (and the jerk, when limited) measured at the
+    tick rate obey."""
+    w = filter_ticks(feed_mm_s, a_stage, j_stage, dt)
     for _ in range(50):
         pad = w - 1
         s = np.concatenate([np.repeat(tool[:1], pad, axis=0), tool, np.repeat(tool[-1:], pad, axis=0)])
         s1 = moving_average(moving_average(s, w), w)
-        if np.max(np.abs(second_difference(s1, dt))) <= a_stage:
+        ok = np.max(np.abs(second_difference(s1, dt))) <= a_stage
+        if ok and j_stage is not None:
+            ok = np.max(np.abs(third_difference(s1, dt))) <= j_stage
+        if ok:
             return s1, w
         w += 2
     raise PlanningError("the low-pass stage path does not converge")  # pragma: no cover
@@ -269,7 +300,7 @@ def plan_split(
     u_name, v_name = scanner_axes(machine)
     dt = machine.dt
     feed = float(feed_mm_s if feed_mm_s is not None else job_feed(program, machine))
-    v_stage, a_stage = _stage_limits(machine)
+    v_stage, a_stage, j_stage = _stage_limits(machine)
     if feed > v_stage:
         raise PlanningError(f"{program.file}: contour speed {feed:g} mm/s is above the stage's {v_stage:g} mm/s")
     m_cal, offset = calibration(machine)
@@ -293,7 +324,7 @@ def plan_split(
             length += float(np.linalg.norm(tool[n_in] - tool_home))
         stats: dict = {}
         if method == "own":
-            main, w = lowpass_split(tool - c0, speed, a_stage, dt)
+            main, w = lowpass_split(tool - c0, speed, a_stage, dt, j_stage)
             pad = w - 1
             stats["filter_ticks"] = w
         else:
@@ -326,6 +357,7 @@ def plan_split(
         max_scanner_reach_mm=float(np.abs(scan).max()),
         field_use=float(reach.max()),
         max_stage_accel_mm_s2=float(np.abs(second_difference(main, dt)).max()),
+        max_stage_jerk_mm_s3=float(np.abs(third_difference(main, dt)).max()),
     )
     return SplitPlan(
         tick_hz=machine.tick_hz,
@@ -364,13 +396,17 @@ def _first_over(program, machine, feed, m_inv, offset, half, a_stage, dt) -> str
 
 
 def _scanner_checks(program, machine, cmd, tool, row, dt, speed) -> dict:
-    """The scanner axes' speed and acceleration against their limits; an error naming the place otherwise."""
+    """The scanner axes' speed, acceleration (and jerk, when limited) against their limits; an error naming the
+    place otherwise."""
     out = {}
     for j, name in enumerate(machine.scanner.axes[:2]):
         ax = machine.axis(name)
         v = np.abs(first_difference(cmd[:, j : j + 1], dt))[:, 0]
         a = np.abs(second_difference(cmd[:, j : j + 1], dt))[:, 0]
-        for what, x, lim in (("speed", v, ax.v_max), ("acceleration", a, ax.a_max)):
+        measured = [("speed", v, ax.v_max), ("acceleration", a, ax.a_max)]
+        if ax.j_max is not None:
+            measured.append(("jerk", np.abs(third_difference(cmd[:, j : j + 1], dt))[:, 0], ax.j_max))
+        for what, x, lim in measured:
             k = int(np.argmax(x))
             if x[k] > lim * (1 - MARGIN / 2):
                 ok = speed * lim / x[k] * 0.98
