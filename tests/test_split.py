@@ -215,3 +215,24 @@ def test_must_show_part_three_times_faster_than_the_stage_alone(tmp_path):
     assert plan.total_time_s <= 1.05 * plan.path_length_mm / plan.feed_mm_s
     alone = plan_job(prog, m).plan.total_time_s  # corners within one discrete, as the tool point
     assert alone >= 3 * plan.total_time_s
+
+
+@pytest.mark.parametrize(
+    ("body", "line", "why"),
+    [
+        ("G1 X3 Y2 F600\nG4 P0.5\nG1 X4\n", 4, "a dwell cannot be split"),
+        ("G1 X3 Y2 F600\nM0\nG1 X4\n", 4, "a pause or tool change stops the tool"),
+        ("G1 X3 Y2 F600\nG1 Z1\nG1 X4\n", 4, "moves Z; a stage + scanner split is planar"),
+    ],
+)
+def test_what_a_split_cannot_do_is_refused_naming_the_line(tmp_path, capsys, body, line, why):
+    from jaxcnc.cli.main import main
+
+    m = tmp_path / "scan.toml"
+    m.write_text(MACHINE.format(field=20.0, extra=""))
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G21 G90 M3 S1\nG0 X2 Y2\n" + body + "M5\nM2\n")
+    assert main(["plan", str(prog), "-m", str(m), "-o", str(tmp_path / "p.ticks"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"jaxcnc: error: {prog}:{line}: {why}") and "\n" not in err
+    assert not (tmp_path / "p.ticks").exists()

@@ -42,7 +42,7 @@ import numpy as np
 
 from jaxcnc.errors import PlanningError
 from jaxcnc.machine import MachineConfig
-from jaxcnc.program import Kind, LaserMode, Program, program_start
+from jaxcnc.program import Event, Kind, LaserMode, Program, program_start
 
 SPLIT_METHODS = ("own", "seed", "none")
 #: Fraction kept below every limit (as the planners' ``NUMERIC_MARGIN``).
@@ -119,6 +119,28 @@ def job_feed(program: Program, machine: MachineConfig) -> float:
     return float(f.min()) if f.size else float(machine.path.feed)
 
 
+def refuse_unsplittable(program: Program) -> None:
+    """Raise, naming the first row, for what a split job cannot do: the tool never stops (a dwell, a pause or a
+    tool change needs rest) and it moves in the XY plane only (the split has no Z; a Z move would be lost)."""
+    pause = (Event.PROGRAM_STOP, Event.OPTIONAL_STOP, Event.TOOL_CHANGE)
+    z0 = program.start[0, 2] if len(program) else 0.0
+    causes = (
+        ((program.kind == Kind.DWELL) & (program.dwell_s > 0), "a dwell cannot be split at constant tool speed"),
+        (
+            (program.kind == Kind.EVENT) & np.isin(program.event, pause),
+            "a pause or tool change stops the tool, which a split job at constant tool speed cannot",
+        ),
+        (
+            program.is_motion & ((program.start[:, 2] != z0) | (program.end[:, 2] != z0)),
+            "moves Z; a stage + scanner split is planar (plan Z moves as a separate job)",
+        ),
+    )
+    first = [(int(np.flatnonzero(bad)[0]), why) for bad, why in causes if np.any(bad)]
+    if first:
+        r, why = min(first)
+        raise PlanningError(f"{program.file}:{program.line[r]}: {why}")
+
+
 def tool_path(program: Program, feed_mm_s: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The tool point at every tick moving at constant speed along the whole program (travels included).
 
@@ -128,10 +150,7 @@ def tool_path(program: Program, feed_mm_s: float, dt: float) -> tuple[np.ndarray
     from jaxcnc.geometry import SpanKind, build_spans
     from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 
-    bad = np.flatnonzero((program.kind == Kind.DWELL) & (program.dwell_s > 0))
-    if bad.size:
-        r = int(bad[0])
-        raise PlanningError(f"{program.file}:{program.line[r]}: a dwell cannot be split at constant tool speed")
+    refuse_unsplittable(program)
     spans = build_spans(program, 0.0)
     keep = np.flatnonzero((spans.kind != SpanKind.POINT) & (np.asarray(spans.length) > 0))
     length = np.asarray(spans.length, np.float64)[keep]
