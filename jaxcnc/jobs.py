@@ -588,6 +588,11 @@ def check_table(
     machine = _machine(machine)
     table = TableFile(table_path)  # verifies every checksum
     meas = measure_table(table, machine)
+    from jaxcnc.ticks.verify_laser import check_laser
+
+    meas.laser = check_laser(table, machine)  # the power channel, tick by tick
+    if meas.laser is not None:
+        meas.violations.extend(meas.laser.violations)
     if np.any(table.events["kind"] == EventKind.WORK_PULSE):
         from jaxcnc.ticks.verify_pulses import check_pulses
 

@@ -76,6 +76,16 @@ class LaserConfig:
     tolerance: float = 0.05
     idle_pulses: bool = True
     pso_mm: float | None = None
+    #: M4 (power scaled with speed): the least fraction of S it fires at while lit (0: dark at standstill).
+    m4_floor: float = 0.0
+    #: M4 user curve: power fraction ``m4_curve_power`` at speed fraction ``m4_curve_speed`` (of the programmed
+    #: feed), linear between; ``None``: power fraction = speed fraction (docs/laser.md).
+    m4_curve_speed: tuple[float, ...] | None = None
+    m4_curve_power: tuple[float, ...] | None = None
+    #: Laser latency: the source fires ``on_delay_s`` after it is commanded on and stops ``off_delay_s`` after
+    #: it is commanded off; the table commands it that much earlier so the burn starts and ends in place.
+    on_delay_s: float = 0.0
+    off_delay_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -188,6 +198,29 @@ def _fraction(v: float) -> str | None:
     return None if 0 <= v < 1 else "must be a fraction in [0, 1)"
 
 
+def _delay(v: float) -> str | None:
+    if not (math.isfinite(v) and v >= 0):
+        return "must be zero or a positive finite number of seconds"
+    return None if v <= 0.1 else f"{v:g} s is longer than any laser's switching delay (0.1 s); was it given in ms?"
+
+
+def _m4_curve(speed: tuple[float, ...] | None, power: tuple[float, ...] | None) -> tuple[str, str] | None:
+    """``(key, why)`` when the M4 curve is malformed: both lists or neither, equal lengths >= 2, speeds
+    rising strictly from 0 to 1, powers in [0, 1]."""
+    if speed is None and power is None:
+        return None
+    if speed is None or power is None:
+        key = "m4_curve_speed" if speed is None else "m4_curve_power"
+        return (key, "m4_curve_speed and m4_curve_power go together")
+    if len(speed) != len(power) or len(speed) < 2:
+        return ("m4_curve_power", f"{len(power)} powers for {len(speed)} speeds (need equal lengths, at least 2)")
+    if speed[0] != 0 or speed[-1] != 1 or any(b <= a for a, b in zip(speed, speed[1:], strict=False)):
+        return ("m4_curve_speed", f"{list(speed)}: speed fractions must rise strictly from 0 to 1")
+    if not all(0 <= p <= 1 for p in power):
+        return ("m4_curve_power", f"{list(power)}: power fractions must lie in [0, 1]")
+    return None
+
+
 def _name(v: str) -> str | None:
     return None if v.strip() == v and v else "must be a non-empty name without surrounding spaces"
 
@@ -233,6 +266,11 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "tolerance": ("number", False, 0.05, _fraction),
         "idle_pulses": ("bool", False, True, None),
         "pso_mm": ("number", False, None, _positive),
+        "m4_floor": ("number", False, 0.0, _fraction),
+        "m4_curve_speed": ("number_list", False, None, None),
+        "m4_curve_power": ("number_list", False, None, None),
+        "on_delay_s": ("number", False, 0.0, _delay),
+        "off_delay_s": ("number", False, 0.0, _delay),
     },
     "scanner": {
         "axes": ("string_list", True, None, None),
@@ -388,6 +426,8 @@ class _Loader:
             raise self.fail("laser", None, "mode 'pulsed' needs pulse_hz")
         if laser["mode"] == "pso" and laser["pso_mm"] is None:
             raise self.fail("laser", None, "mode 'pso' needs pso_mm")
+        if (bad := _m4_curve(laser["m4_curve_speed"], laser["m4_curve_power"])) is not None:
+            raise self.fail("laser", bad[0], bad[1])
         scanner = None
         if "scanner" in doc:
             sc = self.section("scanner", doc["scanner"], "scanner")

@@ -32,18 +32,25 @@ def test_documented_layout(tmp_path):
     meta = blob[128 : 128 + json_bytes]
     assert zlib.crc32(blob[:124] + meta) == header_crc
     assert json.loads(meta)["axes"] == ["x", "y", "z"]
-    assert (version, n_axes, flags & 1) == (1, 3, 1)
+    assert (version, n_axes, flags) == (2, 3, 3)  # fine and power channels
     assert (tick_hz, discrete) == (10000.0, 0.001)
     assert n_blocks == -(-n_rows // block_rows) and data_offset % 4096 == 0
     assert len(blob) == events_offset + 24 * n_events
-    crc = np.frombuffer(blob, "<u4", 2 * n_blocks, data_offset - 8 * n_blocks).reshape(2, n_blocks)
+    crc = np.frombuffer(blob, "<u4", 3 * n_blocks, data_offset - 12 * n_blocks).reshape(3, n_blocks)
     block_bytes = block_rows * n_axes * 4
     fine_offset = data_offset + n_blocks * block_bytes
+    power_offset = fine_offset + n_blocks * block_bytes
     for b in range(n_blocks):
         assert zlib.crc32(blob[data_offset + b * block_bytes : data_offset + (b + 1) * block_bytes]) == crc[0, b]
         assert zlib.crc32(blob[fine_offset + b * block_bytes : fine_offset + (b + 1) * block_bytes]) == crc[1, b]
+        at = power_offset + b * block_rows * 4
+        assert zlib.crc32(blob[at : at + block_rows * 4]) == crc[2, b]
+    assert events_offset == power_offset + n_blocks * block_rows * 4
     pos = np.frombuffer(blob, "<i4", n_rows * n_axes, data_offset).reshape(n_rows, n_axes)
     np.testing.assert_array_equal(pos, table.positions)
+    power = np.frombuffer(blob, "<f4", n_rows, power_offset)
+    assert set(np.unique(power)) == {0.0, 50.0}  # M3 S50: constant while lit
+    np.testing.assert_array_equal(power, table.power)
     ev = blob[events_offset:]
     assert zlib.crc32(ev) == events_crc
     tick, kind, aux, value = struct.unpack_from("<qIId", ev, 24 * 1)
@@ -57,6 +64,7 @@ def test_doc_snippet_reads_positions(tmp_path):
     scope: dict = {}
     exec(code, scope)  # noqa: S102 - the documented snippet, run as a firmware writer would
     np.testing.assert_array_equal(scope["pos"], table.positions)
+    np.testing.assert_array_equal(scope["power"], table.power)
 
 
 def test_documented_bounds_are_the_readers_and_plans_record_their_start(tmp_path):

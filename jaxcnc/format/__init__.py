@@ -5,7 +5,7 @@ The planning side (:mod:`jaxcnc.ticks`) writes tick tables with these modules an
 else of the planning stack (``docs/player.md``). Nothing here may import JAX, SciPy, matplotlib or a
 planning module; a test checks it.
 
-- :mod:`jaxcnc.format.tablefile` — the tick table file v1: header, streamed writer, memory-mapped,
+- :mod:`jaxcnc.format.tablefile` — the tick table file v2 (v1 read): header, streamed writer, memory-mapped,
   checksum-verified reader (``docs/table-format.md`` gives the bytes).
 - :mod:`jaxcnc.format.events` — the table's event records and their codes.
 """

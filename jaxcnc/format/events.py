@@ -27,6 +27,7 @@ class EventKind:
     IDLE_PULSE = 10  # a pump pulse that burns nothing (keeps the lamp in its window): shutter closed
     SHUTTER = 11  # shutter / strobe state changes: aux = 1 open, 0 closed
     PSO_PULSE = 12  # a position-synchronised pulse: aux = pulse number, value = path length (mm)
+    FEED = 13  # (version 2) the programmed feed from here on: value = mm/s (M4 scales power by speed / feed)
 
     NAMES = {
         1: "block",
@@ -41,4 +42,5 @@ class EventKind:
         10: "idle_pulse",
         11: "shutter",
         12: "pso_pulse",
+        13: "feed",
     }

@@ -1,4 +1,4 @@
-"""The tick table file, version 1 — read and written with NumPy and the standard library only.
+"""The tick table file, version 2 (and version 1, read) — NumPy and the standard library only.
 
 This module is shared by the planning side (:mod:`jaxcnc.ticks` writes tables) and the player side
 (:mod:`jaxcnc.hw` reads them on a controller that may have no JAX). ``docs/table-format.md`` specifies
@@ -10,12 +10,16 @@ Layout (all little-endian)::
     [CRC table: u32 per position block, then u32 per fine block]
     [position blocks: n_blocks × block_rows × n_axes int32]
     [fine blocks:     n_blocks × block_rows × n_axes int32]   (only if FLAG_FINE)
+    [power blocks:    n_blocks × block_rows float32]          (only if FLAG_POWER, version 2)
     [event records: n_events × 24 bytes]
 
 Rows are ticks ``0 .. n_rows-1``; the last block is padded by repeating the final row.
 Positions are integer discretes (``round(p / discrete_mm)``). The optional *fine* channel holds
 the rounding residual ``p / discrete_mm - position`` in units of 2^-32 discrete, which lets a
-checker measure speed and acceleration at the tick rate from the unquantised path.
+checker measure speed and acceleration at the tick rate from the unquantised path. The optional
+*power* channel (version 2) holds the laser output of every tick (the S scale; M4 scaled with speed).
+Version 1 files are read unchanged: their power is the held value of their ``laser`` events
+(:meth:`TableFile.read_power`).
 """
 
 from __future__ import annotations
@@ -36,11 +40,14 @@ from jaxcnc.errors import TableFileError
 from jaxcnc.format.events import EVENT_DTYPE, EventKind
 
 MAGIC = b"JXCNCTBL"
-VERSION = 1
+VERSION = 2
+#: Versions this reader accepts (version 1: no power channel, no ``feed`` events).
+READ_VERSIONS = (1, 2)
 HEADER_SIZE = 128
 DATA_ALIGN = 4096
 DEFAULT_BLOCK_ROWS = 4096
 FLAG_FINE = 1
+FLAG_POWER = 2
 FINE_SCALE = 2.0**32  # fine units per discrete
 
 # Bounds a header must respect (docs/table-format.md, "Validation"): a reader refuses anything outside them.
@@ -97,6 +104,7 @@ class TableHeader:
     data_offset: int
     events_offset: int
     meta: dict
+    version: int = VERSION
 
     @property
     def axes(self) -> list[str]:
@@ -107,16 +115,33 @@ class TableHeader:
         return bool(self.flags & FLAG_FINE)
 
     @property
+    def has_power(self) -> bool:
+        return bool(self.flags & FLAG_POWER)
+
+    @property
+    def n_channels(self) -> int:
+        """Blocks of CRCs per block index: positions, then fine, then power (those present)."""
+        return 1 + self.has_fine + self.has_power
+
+    @property
     def block_bytes(self) -> int:
         return self.block_rows * self.n_axes * 4
 
     @property
+    def power_block_bytes(self) -> int:
+        return self.block_rows * 4
+
+    @property
     def crc_offset(self) -> int:
-        return self.data_offset - 4 * self.n_blocks * (2 if self.has_fine else 1)
+        return self.data_offset - 4 * self.n_blocks * self.n_channels
 
     @property
     def fine_offset(self) -> int:
         return self.data_offset + self.n_blocks * self.block_bytes
+
+    @property
+    def power_offset(self) -> int:
+        return self.data_offset + self.n_blocks * self.block_bytes * (2 if self.has_fine else 1)
 
 
 def file_sha256(path: str | Path) -> str | None:
@@ -136,7 +161,7 @@ def _pack_header(h: TableHeader) -> bytes:
     meta = json.dumps(h.meta, sort_keys=True, allow_nan=False).encode("utf-8")
     fixed = _HEADER.pack(
         MAGIC,
-        VERSION,
+        h.version,
         h.n_axes,
         h.block_rows,
         h.flags,
@@ -168,13 +193,22 @@ def _is_number(v: object) -> bool:
 
 
 def _check_scalars(
-    n_axes: int, block_rows: int, flags: int, tick_hz: float, discrete_mm: float, n_rows: int, n_blocks: int
+    n_axes: int,
+    block_rows: int,
+    flags: int,
+    tick_hz: float,
+    discrete_mm: float,
+    n_rows: int,
+    n_blocks: int,
+    version: int = VERSION,
 ) -> None:
     """Raise :class:`_Bad` for the first fixed-header field outside its bounds or inconsistent."""
     if not 1 <= n_axes <= MAX_AXES:
         raise _Bad("n_axes", f"= {n_axes}: a table has 1 to {MAX_AXES} axes")
-    if flags & ~FLAG_FINE:
-        raise _Bad("flags", f"= {flags:#x}: unknown flag bits (only bit 0, the fine channel, is defined)")
+    if version == 1 and flags & ~FLAG_FINE:
+        raise _Bad("flags", f"= {flags:#x}: unknown flag bits (version 1 defines only bit 0, the fine channel)")
+    if flags & ~(FLAG_FINE | FLAG_POWER):
+        raise _Bad("flags", f"= {flags:#x}: unknown flag bits (only bit 0, fine, and bit 1, power, are defined)")
     if not 1 <= block_rows <= MAX_BLOCK_ROWS:
         raise _Bad("block_rows", f"= {block_rows}: must be 1 to {MAX_BLOCK_ROWS}")
     lo, hi = TICK_HZ_RANGE
@@ -241,10 +275,11 @@ def _parse_meta(raw: bytes) -> tuple[object, bool]:
     return json.loads(raw.decode("utf-8"), parse_constant=constant, parse_float=number), bool(seen)
 
 
-def check_events(events: np.ndarray, n_rows: int) -> str | None:
+def check_events(events: np.ndarray, n_rows: int, version: int = VERSION) -> str | None:
     """Why the event records are malformed, or ``None``: ticks within ``0 .. n_rows-1`` and sorted, kinds
-    known, values finite; laser records with a mode of 0, 3 or 4 and a power >= 0, shutter records 0 or 1,
-    coolant records 7, 8 or 9, dwells and block rows >= 0. ``events``: ``(n,)`` of ``EVENT_DTYPE``."""
+    known (to ``version``: ``feed`` is new in version 2), values finite; laser records with a mode of 0, 3 or 4
+    and a power >= 0, shutter records 0 or 1, coolant records 7, 8 or 9, dwells and block rows >= 0, feeds > 0.
+    ``events``: ``(n,)`` of ``EVENT_DTYPE``."""
     if events.size == 0:
         return None
     tick, kind, aux, value = events["tick"], events["kind"], events["aux"], events["value"]
@@ -256,7 +291,8 @@ def check_events(events: np.ndarray, n_rows: int) -> str | None:
         name = EventKind.NAMES.get(int(kind[i]), str(int(kind[i])))
         return f"event {i} ({name} at tick {int(tick[i])}): {why.format(aux=int(aux[i]), value=float(value[i]))}"
 
-    known = np.isin(kind, np.array(list(EventKind.NAMES), np.uint32))
+    kinds = [k for k in EventKind.NAMES if version >= 2 or k < EventKind.FEED]
+    known = np.isin(kind, np.array(kinds, np.uint32))
     laser, shutter, coolant = kind == EventKind.LASER, kind == EventKind.SHUTTER, kind == EventKind.COOLANT
     checks = [
         ((tick < 0) | (tick >= n_rows), f"tick outside the table's rows 0-{n_rows - 1}"),
@@ -268,6 +304,7 @@ def check_events(events: np.ndarray, n_rows: int) -> str | None:
         (shutter & (aux > 1), "shutter state {aux} (expected 0 or 1)"),
         (coolant & ~np.isin(aux, (7, 8, 9)), "coolant code {aux} (expected 7, 8 or 9)"),
         (np.isin(kind, (EventKind.DWELL, EventKind.BLOCK)) & ~(value >= 0), "value {value!r} < 0"),
+        ((kind == EventKind.FEED) & ~(value > 0), "feed {value!r} mm/s is not positive"),
     ]
     for mask, why in checks:
         if (msg := first(mask, why)) is not None:
@@ -275,13 +312,23 @@ def check_events(events: np.ndarray, n_rows: int) -> str | None:
     return None
 
 
-class TableWriter:
-    """Streams rows into a new table file; the row count is known up front.
+def power_from_events(events: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """Laser output of ticks ``start:stop`` held from the ``laser`` events (the version 1 reading), ``(m,)``
+    float32: each tick carries the value of the latest laser event at or before it (0 before the first)."""
+    las = events[events["kind"] == EventKind.LASER]
+    ticks = np.arange(start, stop, dtype=np.int64)
+    i = np.searchsorted(las["tick"], ticks, side="right") - 1
+    vals = np.concatenate([[0.0], las["value"]])
+    return vals[i + 1].astype(np.float32)
 
-    Use as a context manager; ``write(pos, fine)`` any number of rows at a time (``(m, n_axes)``
-    int32 arrays), then ``events`` is set and ``close()`` finalises CRCs and the header.
-    A file is written to ``path + '.part'`` and renamed only when complete, so a crash never
-    leaves a table that looks valid.
+
+class TableWriter:
+    """Streams rows into a new table file (version 2); the row count is known up front.
+
+    Use as a context manager; ``write(pos, fine, power)`` any number of rows at a time (``(m, n_axes)``
+    int32 arrays; ``power`` ``(m,)`` finite >= 0, required when ``power=True``), then ``events`` is set and
+    ``close()`` finalises CRCs and the header. A file is written to ``path + '.part'`` and renamed only when
+    complete, so a crash never leaves a table that looks valid.
     """
 
     def __init__(
@@ -294,25 +341,25 @@ class TableWriter:
         n_rows: int,
         meta: dict | None = None,
         fine: bool = True,
+        power: bool = False,
         block_rows: int = DEFAULT_BLOCK_ROWS,
     ):
         n_axes = len(axes)
         n_blocks = -(-n_rows // block_rows) if block_rows > 0 else 0
         meta = dict(meta or {})
         meta["axes"] = list(axes)
+        flags = (FLAG_FINE if fine else 0) | (FLAG_POWER if power else 0)
         try:  # never write a header that a reader refuses
-            _check_scalars(n_axes, block_rows, FLAG_FINE if fine else 0, float(tick_hz), float(discrete_mm), n_rows,
-                           n_blocks)  # fmt: skip
+            _check_scalars(n_axes, block_rows, flags, float(tick_hz), float(discrete_mm), n_rows, n_blocks)
             _check_meta(meta, n_axes)
         except _Bad as bad:
             raise ValueError(f"table header field {bad}") from None
         self.path = Path(path)
         self.tmp = self.path.with_name(self.path.name + ".part")
-        flags = FLAG_FINE if fine else 0
         head_len = HEADER_SIZE + len(json.dumps(meta, sort_keys=True, allow_nan=False).encode("utf-8"))
-        crc_len = 4 * n_blocks * (2 if fine else 1)
-        data_offset = _align(head_len + crc_len)
-        events_offset = data_offset + n_blocks * block_rows * n_axes * 4 * (2 if fine else 1)
+        n_ch = 1 + bool(fine) + bool(power)
+        data_offset = _align(head_len + 4 * n_blocks * n_ch)
+        events_offset = data_offset + n_blocks * block_rows * (n_axes * 4 * (2 if fine else 1) + (4 if power else 0))
         self.header = TableHeader(
             n_axes,
             block_rows,
@@ -332,9 +379,10 @@ class TableWriter:
         self._rows = 0
         self._buf_pos = np.empty((block_rows, n_axes), np.int32)
         self._buf_fine = np.empty((block_rows, n_axes), np.int32)
+        self._buf_power = np.empty((block_rows, 1), np.float32)
         self._fill = 0
         self._block = 0
-        self._crc = np.zeros((2 if fine else 1, n_blocks), np.uint32)
+        self._crc = np.zeros((n_ch, n_blocks), np.uint32)
         self.events = np.zeros(0, EVENT_DTYPE)
 
     def __enter__(self) -> TableWriter:
@@ -346,20 +394,28 @@ class TableWriter:
         else:
             self.abort()
 
-    def write(self, pos: np.ndarray, fine: np.ndarray | None = None) -> None:
-        """Append rows: ``pos`` and ``fine`` of shape ``(m, n_axes)`` int32."""
+    def write(self, pos: np.ndarray, fine: np.ndarray | None = None, power: np.ndarray | None = None) -> None:
+        """Append rows: ``pos`` and ``fine`` of shape ``(m, n_axes)`` int32, ``power`` ``(m,)`` (float32, >= 0)."""
         h = self.header
         pos = np.asarray(pos, np.int32)
         if self._rows + pos.shape[0] > h.n_rows:
             raise ValueError("more rows written than announced")
         if h.has_fine and fine is None:
             raise ValueError("this table has a fine channel: pass fine")
+        if h.has_power:
+            if power is None:
+                raise ValueError("this table has a power channel: pass power")
+            power = np.asarray(power, np.float32).reshape(-1)
+            if power.shape[0] != pos.shape[0] or not np.all(np.isfinite(power) & (power >= 0)):
+                raise ValueError("power must be one finite value >= 0 per row")
         i = 0
         while i < pos.shape[0]:
             take = min(h.block_rows - self._fill, pos.shape[0] - i)
             self._buf_pos[self._fill : self._fill + take] = pos[i : i + take]
             if h.has_fine:
                 self._buf_fine[self._fill : self._fill + take] = fine[i : i + take]
+            if h.has_power:
+                self._buf_power[self._fill : self._fill + take, 0] = power[i : i + take]
             self._fill += take
             i += take
             self._rows += take
@@ -371,11 +427,15 @@ class TableWriter:
         if self._fill < h.block_rows:  # last block: repeat the final row (the machine is at rest)
             self._buf_pos[self._fill :] = self._buf_pos[self._fill - 1]
             self._buf_fine[self._fill :] = self._buf_fine[self._fill - 1]
-        for ch, (buf, base) in enumerate(((self._buf_pos, h.data_offset), (self._buf_fine, h.fine_offset))):
-            if ch == 1 and not h.has_fine:
-                break
-            data = buf.astype("<i4", copy=False).tobytes()
-            self._f.seek(base + self._block * h.block_bytes)
+            self._buf_power[self._fill :] = self._buf_power[self._fill - 1]
+        channels = [(self._buf_pos, "<i4", h.data_offset, h.block_bytes)]
+        if h.has_fine:
+            channels.append((self._buf_fine, "<i4", h.fine_offset, h.block_bytes))
+        if h.has_power:
+            channels.append((self._buf_power, "<f4", h.power_offset, h.power_block_bytes))
+        for ch, (buf, dtype, base, size) in enumerate(channels):
+            data = buf.astype(dtype, copy=False).tobytes()
+            self._f.seek(base + self._block * size)
             self._f.write(data)
             self._crc[ch, self._block] = zlib.crc32(data)
         self._block += 1
@@ -432,8 +492,11 @@ class TableFile:
                 if len(fixed) < HEADER_SIZE or fixed[:8] != MAGIC:
                     raise self._err("not a jaxcnc table file (bad magic)")
                 vals = _HEADER.unpack_from(fixed)
-                if vals[1] != VERSION:
-                    raise self._err(f"table format version {vals[1]} is not supported (this reader: {VERSION})")
+                if vals[1] not in READ_VERSIONS:
+                    raise self._err(
+                        f"table format version {vals[1]} is not supported (this reader: "
+                        f"{', '.join(map(str, READ_VERSIONS))})"
+                    )
                 json_bytes = vals[9]
                 if json_bytes > MAX_JSON_BYTES:
                     raise self._err(f"header field json_bytes = {json_bytes}: more than {MAX_JSON_BYTES} bytes")
@@ -454,23 +517,23 @@ class TableFile:
         f = dict(zip(_FIELDS, vals, strict=True))
         try:
             _check_scalars(*(f[k] for k in ("n_axes", "block_rows", "flags", "tick_hz", "discrete_mm", "n_rows")),
-                           f["n_blocks"])  # fmt: skip
+                           f["n_blocks"], f["version"])  # fmt: skip
             _check_meta(meta, f["n_axes"])
         except _Bad as bad:
             field = bad.field if bad.field == "metadata" else f"field {bad.field}"
             raise self._err(f"header {field} {bad.reason}") from None
         if non_finite:
             raise self._err("header metadata holds NaN or Infinity (not a number a table may carry)")
-        self.header = h = TableHeader(**{k: f[k] for k in _HEADER_KEYS}, meta=meta)
+        self.header = h = TableHeader(**{k: f[k] for k in _HEADER_KEYS}, meta=meta, version=f["version"])
         n_axes, n_blocks, n_events, events_offset = h.n_axes, h.n_blocks, h.n_events, h.events_offset
-        n_ch = 2 if h.has_fine else 1
+        n_ch = h.n_channels
         want_data = _align(HEADER_SIZE + json_bytes + 4 * n_ch * n_blocks)
         if h.data_offset != want_data:
             raise self._err(
                 f"header field data_offset = {h.data_offset}: the layout puts the data at {want_data} "
                 "(the first multiple of 4096 after the header, the metadata and the CRC table)"
             )
-        want_events = h.data_offset + n_ch * n_blocks * h.block_bytes
+        want_events = h.power_offset + (n_blocks * h.power_block_bytes if h.has_power else 0)
         if events_offset != want_events:
             raise self._err(f"header field events_offset = {events_offset}: the data ends at {want_events}")
         expected = events_offset + n_events * EVENT_DTYPE.itemsize
@@ -487,13 +550,16 @@ class TableFile:
             if h.has_fine
             else None
         )
+        self._power = (
+            np.memmap(self.path, dtype="<f4", mode="r", offset=h.power_offset, shape=(rows,)) if h.has_power else None
+        )
         self._crc = np.fromfile(self.path, dtype="<u4", count=n_ch * n_blocks, offset=h.crc_offset).reshape(
             n_ch, n_blocks
         )
         self.events = np.fromfile(self.path, dtype=EVENT_DTYPE, count=n_events, offset=events_offset)
         if verify:
             self.verify()
-        if (why := check_events(self.events, h.n_rows)) is not None:
+        if (why := check_events(self.events, h.n_rows, h.version)) is not None:
             raise self._err(f"malformed events: {why}")
 
     def _err(self, reason: str) -> TableFileError:
@@ -513,31 +579,36 @@ class TableFile:
             )
 
     def verify(self) -> None:
-        """Check every block's CRC, the last block's padding rows and the events' CRC; raise on the first
-        damage found.
+        """Check every block's CRC, the last block's padding rows, the power values (finite, >= 0) and the
+        events' CRC; raise on the first damage found.
 
         Blocks are read with ``pread`` (not through the memory map), so verifying a table of any
         size keeps only one block in memory.
         """
         h = self.header
+        channels = [("position", h.data_offset, h.block_bytes, "<i4", h.n_axes)]
+        if h.has_fine:
+            channels.append(("fine", h.fine_offset, h.block_bytes, "<i4", h.n_axes))
+        if h.has_power:
+            channels.append(("power", h.power_offset, h.power_block_bytes, "<f4", 1))
         with open(self.path, "rb") as f:
             fd = f.fileno()
-            for ch, base in enumerate((h.data_offset, h.fine_offset)):
-                if ch == 1 and not h.has_fine:
-                    break
+            for ch, (what, base, size, dtype, width) in enumerate(channels):
                 for b in range(h.n_blocks):
-                    data = os.pread(fd, h.block_bytes, base + b * h.block_bytes)
-                    if zlib.crc32(data) == self._crc[ch, b]:
-                        continue
+                    data = os.pread(fd, size, base + b * size)
                     first = b * h.block_rows
                     last = min(first + h.block_rows, h.n_rows) - 1
-                    what = "position" if ch == 0 else "fine"
-                    raise self._err(f"{what} block {b} (ticks {first}-{last}) fails its checksum (damaged data)")
+                    if zlib.crc32(data) != self._crc[ch, b]:
+                        raise self._err(f"{what} block {b} (ticks {first}-{last}) fails its checksum (damaged data)")
+                    if what == "power":
+                        p = np.frombuffer(data, dtype="<f4")
+                        if not np.all(np.isfinite(p) & (p >= 0)):
+                            i = int(np.argmax(~(np.isfinite(p) & (p >= 0))))
+                            raise self._err(f"power at tick {first + i} is {float(p[i])!r}: must be finite and >= 0")
                 # the last block is padded by repeating the final row: the machine stands still after it
                 tail = h.n_rows - (h.n_blocks - 1) * h.block_rows
-                last = np.frombuffer(data, dtype="<i4").reshape(h.block_rows, h.n_axes)
+                last = np.frombuffer(data, dtype=dtype).reshape(h.block_rows, width)
                 if np.any(last[tail:] != last[tail - 1]):
-                    what = "position" if ch == 0 else "fine"
                     raise self._err(
                         f"{what} block {h.n_blocks - 1}: the padding rows after tick {h.n_rows - 1} do not repeat "
                         "the final row (malformed padding)"
@@ -569,6 +640,30 @@ class TableFile:
             self._fd = os.open(self.path, os.O_RDONLY)
         data = os.pread(self._fd, (stop - start) * row, h.data_offset + start * row)
         return np.frombuffer(data, dtype="<i4").reshape(stop - start, h.n_axes).astype(np.int32)
+
+    def read_power(self, start: int, stop: int) -> np.ndarray:
+        """The laser output of rows ``start:stop``, ``(m,)`` float32 (the S scale; 0 = dark), read with ``pread``.
+
+        From the power channel when the table has one; otherwise (version 1, or a table written without it)
+        the value of the latest ``laser`` event at or before each tick — what a version 1 player drove.
+        """
+        h = self.header
+        start, stop = max(0, start), min(stop, h.n_rows)
+        if stop <= start:
+            return np.zeros(0, np.float32)
+        if h.has_power:
+            if self._fd is None:
+                self._fd = os.open(self.path, os.O_RDONLY)
+            data = os.pread(self._fd, (stop - start) * 4, h.power_offset + start * 4)
+            return np.frombuffer(data, dtype="<f4").astype(np.float32)
+        return power_from_events(self.events, start, stop)
+
+    @property
+    def power(self) -> np.ndarray:
+        """``(n_rows,)`` float32 laser output per tick (memory-mapped channel, or from the events)."""
+        if self._power is not None:
+            return self._power[: self.header.n_rows]
+        return power_from_events(self.events, 0, self.header.n_rows)
 
     @property
     def n_rows(self) -> int:

@@ -18,6 +18,7 @@ from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
+from jaxcnc.ticks.laser import power_of_rows
 from jaxcnc.ticks.pso import pso_events
 from jaxcnc.ticks.sample import Sampler, TickSampler, machine_axes, quantize
 
@@ -61,6 +62,11 @@ def job_events(job: PlannedJob) -> np.ndarray:
     add(tick[changed], EventKind.LASER, mode[changed], power[changed], seg=changed)
     if power.size and power[-1] != 0:
         add(np.int64(plan.n_ticks), EventKind.LASER, 0, 0.0)
+    # Feed: where the programmed feed of the moves changes (M4 scales the power by speed / feed).
+    moves = np.flatnonzero(((kind == Kind.LINE) | (kind == Kind.ARC) | (kind == Kind.CURVE)) & ~prog.rapid[rows])
+    feed = np.where(np.isnan(prog.feed[rows[moves]]), job.machine.path.feed, prog.feed[rows[moves]])
+    fc = moves[np.flatnonzero(np.diff(np.concatenate([[0.0], feed])) != 0)]
+    add(tick[fc], EventKind.FEED, 0, feed[np.searchsorted(moves, fc)], seg=fc)
     dw = np.flatnonzero((kind == Kind.DWELL) & first_of_block)
     add(tick[dw], EventKind.DWELL, 0, prog.dwell_s[rows[dw]], seg=dw)
     ev = np.flatnonzero((kind == Kind.EVENT) & (spans.kind == SpanKind.POINT))
@@ -83,14 +89,22 @@ def write_samples(
     events: np.ndarray,
     meta: dict,
     progress: bool | None = None,
+    power: bool = True,
 ) -> Path:
     """Write a table file from a sampler's chunks of exact machine-axis positions and the events.
 
-    ``progress``: show a progress bar (``None``: only on a terminal).
+    ``progress``: show a progress bar (``None``: only on a terminal). ``power``: write the laser power channel
+    (:func:`jaxcnc.ticks.laser.power_of_rows`: M3 constant, M4 scaled with the speed over each tick).
     """
     m = machine
     with TableWriter(
-        path, axes=list(m.axis_names), tick_hz=m.tick_hz, discrete_mm=m.discrete_mm, n_rows=sampler.n_rows, meta=meta
+        path,
+        axes=list(m.axis_names),
+        tick_hz=m.tick_hz,
+        discrete_mm=m.discrete_mm,
+        n_rows=sampler.n_rows,
+        meta=meta,
+        power=power,
     ) as w:
         bar = tqdm(
             total=sampler.n_rows,
@@ -100,10 +114,21 @@ def write_samples(
             disable=progress is False if progress is not None else None,
             leave=False,
         )
-        for _first, p in sampler:
+        held: tuple[int, np.ndarray] | None = None  # one chunk back: its power needs the next chunk's first row
+
+        def put(first: int, p: np.ndarray, after: np.ndarray) -> None:
             pos, fine = quantize(p, m.discrete_mm)
-            w.write(np.asarray(pos), np.asarray(fine))
+            lit = power_of_rows(np.vstack([p, after]), events, first, m.tick_hz, m.laser) if power else None
+            w.write(np.asarray(pos), np.asarray(fine), lit)
             bar.update(p.shape[0])
+
+        for first, p in sampler:
+            p = np.asarray(p)
+            if held is not None:
+                put(*held, p[:1])
+            held = (first, p)
+        if held is not None:
+            put(*held, held[1][-1:])  # at rest after the last row
         bar.close()
         w.events = events
     return Path(path)

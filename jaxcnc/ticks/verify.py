@@ -36,7 +36,8 @@ class Violation:
     first_tick: int
     last_tick: int
     axis: str
-    quantity: str  # "v", "a", "j", "pos", "start", "path", "table" or "pulse" (the last two: ``axis`` holds the text)
+    #: "v", "a", "j", "pos", "start", "path", "table", "pulse" or "laser" (the last three: ``axis`` holds the text)
+    quantity: str
     value: float  # the worst value in the run
     limit: float
 
@@ -45,6 +46,9 @@ class Violation:
             return f"table: {self.axis}"
         if self.quantity == "pulse":
             return f"tick {self.first_tick}: {self.axis}"
+        if self.quantity == "laser":  # ``axis`` holds the text (jaxcnc.ticks.verify_laser)
+            span = f"tick {self.first_tick}" + (f" (to {self.last_tick})" if self.last_tick != self.first_tick else "")
+            return f"{span} laser: {self.axis}"
         if self.quantity == "start":
             return (
                 f"tick 0 axis {self.axis}: the first row is at {self.value:.6g} mm but the job starts at "
@@ -75,6 +79,7 @@ class Measurement:
     pulses: Any = None  # a pulsed table's PulseCheck (jaxcnc.ticks.verify_pulses), when checked
     path: Any = None  # the PathDeviation (jaxcnc.ticks.deviation), when the program was compared
     path_note: str = ""  # why the path was not compared, when it was not
+    laser: Any = None  # the LaserCheck (jaxcnc.ticks.verify_laser), when the table has a power channel
 
     @property
     def ok(self) -> bool:

@@ -1,0 +1,106 @@
+"""Independent check of a table's laser channel against its positions, events and the machine file (NumPy only).
+
+For every tick the expected output is recomputed from the table alone (``docs/laser.md``): the latest ``laser``
+event gives the mode and S, the latest ``feed`` event the programmed feed F, the unquantised positions of the
+tick and the next the tool's mean speed v over the tick; M3 → S, M4 → ``S · max(floor, curve(v / F))``, dark → 0.
+The stored power must equal it within :data:`POWER_TOL` of S. For tables whose header marks them
+``constant_speed_laser`` (raster jobs: the beam may fire only at the programmed speed) every lit tick's speed must
+also be within ``speed_tol`` of F. Nothing here reads the plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from jaxcnc.format import EventKind, TableFile
+from jaxcnc.machine import MachineConfig
+from jaxcnc.ticks.verify import TableRows, Violation, _runs
+
+#: Tolerance on the power, as a fraction of S (float32 storage is 6e-8; positions carry ~1e-13 mm of noise).
+POWER_TOL = 1e-4
+#: Relative speed tolerance of a constant-speed (raster) table's lit ticks.
+SPEED_TOL = 1e-3
+
+
+@dataclass
+class LaserCheck:
+    """What the laser check measured: ticks lit, ticks under M4, the largest power error (fraction of S), and on
+    constant-speed tables the largest relative speed deviation of a lit tick."""
+
+    n_lit: int = 0
+    n_m4: int = 0
+    max_power_error: float = 0.0
+    max_speed_deviation: float = 0.0
+    constant_speed: bool = False
+    violations: list[Violation] = field(default_factory=list)
+
+
+def _held(events: np.ndarray, kind: int, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ev = events[events["kind"] == kind]
+    i = np.searchsorted(ev["tick"], ticks, side="right")
+    return np.r_[0, ev["aux"].astype(np.int64)][i], np.r_[0.0, ev["value"]][i]
+
+
+def check_laser(
+    table: TableFile, machine: MachineConfig, chunk_rows: int = 1 << 16, speed_tol: float = SPEED_TOL
+) -> LaserCheck | None:
+    """Check the power channel of ``table`` tick by tick (see the module); ``None`` when it has none."""
+    h = table.header
+    if not h.has_power:
+        return None
+    las = machine.laser
+    out = LaserCheck(constant_speed=bool(h.meta.get("constant_speed_laser")))
+    bad_power: list[tuple[int, int, float]] = []
+    bad_speed: list[tuple[int, int, float]] = []
+    with TableRows(table) as rows:
+        for start in range(0, h.n_rows, chunk_rows):
+            stop = min(start + chunk_rows, h.n_rows)
+            p = rows.exact_mm(start, min(stop + 1, h.n_rows))
+            if p.shape[0] == stop - start:  # the last row: at rest after it
+                p = np.vstack([p, p[-1:]])
+            ticks = np.arange(start, stop, dtype=np.int64)
+            mode, s = _held(table.events, EventKind.LASER, ticks)
+            _, feed = _held(table.events, EventKind.FEED, ticks)
+            v = np.sqrt((np.diff(p, axis=0) ** 2).sum(axis=1)) * h.tick_hz
+            ratio = np.clip(np.where(feed > 0, v / np.where(feed > 0, feed, 1.0), 0.0), 0.0, 1.0)
+            if las.m4_curve_speed is not None and las.m4_curve_power is not None:
+                ratio = np.interp(ratio, las.m4_curve_speed, las.m4_curve_power)
+            m4 = (mode == 4) & (feed > 0)
+            want = np.where(mode == 0, 0.0, s * np.where(m4, np.maximum(ratio, las.m4_floor), 1.0))
+            got = table.read_power(start, stop).astype(np.float64)
+            err = np.abs(got - want) / np.maximum(s, 1e-12)
+            err = np.where((mode == 0) & (got == 0), 0.0, np.where(mode == 0, np.inf, err))
+            out.n_lit += int((got > 0).sum())
+            out.n_m4 += int(m4.sum())
+            out.max_power_error = max(out.max_power_error, float(err.max(initial=0.0)))
+            for r0, r1 in _runs(err > POWER_TOL):
+                bad_power.append((start + r0, start + r1, float(err[r0 : r1 + 1].max())))
+            if out.constant_speed:
+                lit = got > 0
+                dev = np.where(lit & (feed > 0), np.abs(v - feed) / np.where(feed > 0, feed, 1.0), 0.0)
+                out.max_speed_deviation = max(out.max_speed_deviation, float(dev.max(initial=0.0)))
+                for r0, r1 in _runs(dev > speed_tol):
+                    bad_speed.append((start + r0, start + r1, float(dev[r0 : r1 + 1].max())))
+    for r0, r1, e in _merge(bad_power):
+        why = f"power differs from the mode, S, feed and speed by {e:.3g} of S (allowed {POWER_TOL:g})"
+        out.violations.append(Violation(r0, r1, why, "laser", e, POWER_TOL))
+    for r0, r1, e in _merge(bad_speed):
+        why = (
+            f"lit at {100 * e:.3g} % away from the programmed speed (a constant-speed job; "
+            f"allowed {100 * speed_tol:g} %)"
+        )
+        out.violations.append(Violation(r0, r1, why, "laser", e, speed_tol))
+    return out
+
+
+def _merge(runs: list[tuple[int, int, float]]) -> list[tuple[int, int, float]]:
+    """Join runs split by chunk boundaries."""
+    merged: list[list] = []
+    for r0, r1, v in runs:
+        if merged and r0 == merged[-1][1] + 1:
+            merged[-1][1], merged[-1][2] = r1, max(merged[-1][2], v)
+        else:
+            merged.append([r0, r1, v])
+    return [tuple(m) for m in merged]
