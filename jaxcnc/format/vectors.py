@@ -618,7 +618,7 @@ def execute(rec: np.ndarray, header: VectorHeader, where: str = "<list>") -> Exe
             elif not np.array_equal(tgt, pos):
                 raise VectorFileError(f"{where}: record {i} (list_start): the list starts at {tgt.tolist()}, "
                                       f"the beam is at {pos.tolist()}")  # fmt: skip
-            low.list_rows.append(low.row)
+            low.list_rows.append(low.row + 1 if low.list_rows else 0)  # the first row the list produces
         elif op == Op.LIST_END:
             end_chain()
         elif op in (Op.JUMP_ABS, Op.TIMED_JUMP):
@@ -710,8 +710,6 @@ def execute(rec: np.ndarray, header: VectorHeader, where: str = "<list>") -> Exe
                     int(r["pos"][0]),
                     float(r["value"]),
                 )
-                if sky_mode and mark_v is None:
-                    raise VectorFileError(f"{where}: record {i} (set_sky_writing): no mark speed set before it")
             elif op == Op.SET_LASER:
                 power = float(r["value"])
             elif op == Op.WAIT:
