@@ -90,8 +90,66 @@ def _drawing_options(args: argparse.Namespace) -> dict:
     }
 
 
+def _plan_dynamic(args: argparse.Namespace) -> int:
+    """``plan --shaper`` / ``--avoid-bands`` (issue 20): jaxcnc.dynamics.shaped.plan_dynamic_file."""
+    from jaxcnc.dynamics.shaped import plan_dynamic_file
+    from jaxcnc.planners.shaping import parse_bands
+
+    report = plan_dynamic_file(
+        Path(args.input),
+        Path(args.machine),
+        Path(args.output),
+        args.shaper,
+        progress=False if args.quiet else None,
+        dialect=args.dialect,
+        f_hz=args.shaper_hz,
+        zeta=args.shaper_zeta,
+        per_axis=args.shaper_per_axis,
+        tol_mm=args.shaper_tol,
+        bands=parse_bands(args.avoid_bands) if args.avoid_bands else None,
+        planner=args.planner,
+    )
+    if args.report:
+        Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
+    if not args.quiet:
+        print(
+            f"planned {report['input']}: {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm, "
+            f"{report['total_time_s']:.3f} s (unshaped {report['unshaped_time_s']:.3f} s) = {report['n_ticks']} ticks, "
+            f"planner {report['planner']} -> {report['table']} ({report['plan_wall_s']:.2f} s)"
+        )
+        if "shaping" in report:
+            sh = report["shaping"]
+            print(
+                f"  shaper {sh['duration_s'] * 1e3:.2f} ms, held {sh['hold_ticks']} ticks at {sh['rest_points']} rest "
+                f"points (+{sh['extra_s']:.3f} s); {sh['stops_added']} corners made stops, {sh['arc_feed_caps']} arcs "
+                f"slowed, for a contour tolerance of {sh['contour_tol_mm']:.3g} mm"
+            )
+        if "speed_bands" in report:
+            b = report["speed_bands"]
+            bands = ", ".join(f"{lo:.1f}-{hi:.1f}" for lo, hi in b["bands_mm_s"])
+            print(f"  speed bands avoided: {bands} mm/s ({b['rows_slowed']} rows slowed)")
+        print(
+            f"  measured on the table: max |v| {_fmt_axes(report['max_abs_v'], 'mm/s')}; max |a| "
+            f"{_fmt_axes(report['max_abs_a'], 'mm/s²')}; at most {report['max_path_deviation_mm'] * 1e3:.3g} µm from "
+            f"the programmed path (tolerance {report['path_tolerance_mm'] * 1e3:.3g} µm)"
+        )
+        if "dynamics" in report:
+            d = report["dynamics"]
+            print(
+                f"  simulated axes: residual vibration after {d['n_stops']} stops max "
+                f"{d['max_residual_mm'] * 1e3:.3g} µm (mean {d['mean_residual_mm'] * 1e3:.3g} µm), "
+                f"contour error max {d['max_contour_mm'] * 1e3:.3g} µm"
+            )
+    for line in report["violations"][:50]:
+        print(f"violation: {line}", file=sys.stderr)
+    return 1 if report["violations"] else 0
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     from jaxcnc.jobs import JobBounds, plan_file
+
+    if args.shaper or args.avoid_bands:
+        return _plan_dynamic(args)
 
     report = plan_file(
         Path(args.input),
@@ -185,6 +243,27 @@ def _path_line(meas) -> str:
     )
 
 
+def _dynamics_lines(args: argparse.Namespace, table) -> list[str]:
+    """``check --dynamics``: the table played through the machine's axis modes (jaxcnc.dynamics), as lines."""
+    if not (args.dynamics or args.dynamics_plot):
+        return []
+    from jaxcnc.dynamics import simulate_table
+    from jaxcnc.machine import load_machine
+
+    sim = simulate_table(table, load_machine(args.machine), keep=bool(args.dynamics_plot))
+    lines = [
+        f"  simulated axes ({sim.modes_text()}): residual vibration after {sim.stop_ticks.size} stops max "
+        f"{sim.max_residual_mm * 1e3:.4g} µm, mean {sim.mean_residual_mm * 1e3:.4g} µm; contour error max "
+        f"{sim.max_contour_mm * 1e3:.4g} µm (rms {sim.rms_contour_mm * 1e3:.3g}); tracking error max "
+        f"{sim.max_tracking_mm * 1e3:.4g} µm"
+    ]
+    if args.dynamics_plot:
+        from jaxcnc.dynamics.picture import plot_simulation
+
+        lines.append(f"  wrote {plot_simulation(sim, args.dynamics_plot, str(args.table))}")
+    return lines
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     from jaxcnc.jobs import check_table
 
@@ -196,6 +275,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         args.dialect,
     )
     h = table.header
+    dynamics = _dynamics_lines(args, table)
     if meas.ok:
         checked = "travel, limits and path hold" if meas.path is not None else "travel and limits hold"
         print(
@@ -212,6 +292,8 @@ def cmd_check(args: argparse.Namespace) -> int:
             )
         if meas.path is not None or meas.pulses is None:
             print(_path_line(meas))
+        if dynamics:
+            print(*dynamics, sep="\n")
         return 0
     shown = meas.violations if args.max_lines <= 0 else meas.violations[: args.max_lines]
     for v in shown:
@@ -220,6 +302,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(f"... and {len(meas.violations) - len(shown)} more violations")
     if meas.path is not None or meas.pulses is None:
         print(_path_line(meas), file=sys.stderr)  # standard output: the violations only
+    if dynamics:
+        print(*dynamics, sep="\n", file=sys.stderr)
     print(f"FAILED {args.table}: {len(meas.violations)} violations", file=sys.stderr)
     return 1
 
@@ -562,6 +646,28 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--layers", metavar="A,B", help="DXF: cut only these layers (default: every visible one)")
     sp.add_argument("--kinematics", help="split jobs: write the per-tick kinematic table here (CSV)")
     sp.add_argument("--split-plot", help="split jobs: draw S, S1, S2 and the field here (PNG)")
+    sp.add_argument(
+        "--shaper",
+        choices=("zv", "mzv", "zvd", "ei", "2hump_ei", "3hump_ei"),
+        help="input shaping against vibration (docs/vibration.md): the ticks convolved with this shaper for the "
+        "machine's lowest axis mode (mode_hz, mode_zeta) or --shaper-hz; stops held for the shaper, the shaped "
+        "table checked",
+    )
+    sp.add_argument("--shaper-hz", type=float, help="the shaper's design frequency (default: the machine's mode)")
+    sp.add_argument("--shaper-zeta", type=float, help="the shaper's design damping ratio (default: the mode's)")
+    sp.add_argument(
+        "--shaper-per-axis", action="store_true", help="shape each axis for its own first mode (not the path)"
+    )
+    sp.add_argument(
+        "--shaper-tol",
+        type=float,
+        help="contour error (mm) allowed to shaping's corner and arc smoothing (default: [path] corner_tol_mm)",
+    )
+    sp.add_argument(
+        "--avoid-bands",
+        help="keep the feed out of resonant speed bands: 'auto' (the axis modes times the part's repeat lengths) "
+        "or LOW-HIGH[,LOW-HIGH] in mm/s",
+    )
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
     sp.set_defaults(func=cmd_plan, needs=("jax",))
 
@@ -587,6 +693,13 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument(
         "--dialect", help="G-code dialect of the program: linuxcnc (default), siemens, fanuc or a dialect TOML file"
     )
+    sp.add_argument(
+        "--dynamics",
+        action="store_true",
+        help="also play the table through the machine's axis modes (mode_hz, mode_zeta): residual vibration after "
+        "each stop, contour and tracking error (docs/vibration.md)",
+    )
+    sp.add_argument("--dynamics-plot", help="with --dynamics: draw commanded vs simulated here (PNG)")
     sp.set_defaults(func=cmd_check)
 
     sp = sub.add_parser(
