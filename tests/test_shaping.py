@@ -131,3 +131,20 @@ def test_band_avoidance_keeps_a_resonant_serration_out_of_the_band(vib):
     assert lo < 80.4 < hi and out["auto"][0]["speed_bands"]["rows_slowed"] > 0
     assert max(out["auto"][0]["max_abs_v"].values()) <= lo * (1 + 1e-6)
     assert out[None][1] > 2 * out["auto"][1], out
+
+
+def test_cli_plans_shaped_checks_dynamics_draws_and_refuses_bad_bands(vib, capsys):
+    from jaxcnc.cli.main import main
+
+    machine, part, folder = vib
+    m = machine.source
+    out = folder / "cli.ticks"
+    assert main(["plan", str(part), "-m", m, "-o", str(out), "--shaper", "zvd", "--avoid-bands", "30-35"]) == 0
+    said = capsys.readouterr().out
+    assert "planner topp+zvd" in said and "speed bands avoided: 30.0-35.0 mm/s" in said and "residual" in said
+    png = folder / "sim.png"
+    assert main(["check", str(out), "-m", m, "--dynamics", "--dynamics-plot", str(png)]) == 0
+    said = capsys.readouterr().out
+    assert said.startswith("OK ") and "residual vibration after 6 stops" in said and png.stat().st_size > 10_000
+    assert main(["plan", str(part), "-m", m, "-o", str(out), "--avoid-bands", "30-x"]) == 2
+    assert "speed band '30-x'" in capsys.readouterr().err

@@ -68,6 +68,12 @@ class Simulation:
     def mean_residual_mm(self) -> float:
         return float(self.residual_mm.mean()) if self.residual_mm.size else 0.0
 
+    def modes_text(self) -> str:
+        """The modes simulated, e.g. ``x: 40 Hz ζ=0.05; y: 40 Hz ζ=0.05``."""
+        return "; ".join(
+            f"{a}: " + ", ".join(f"{m.f_hz:g} Hz ζ={m.zeta:g}" for m in ms) for a, ms in self.modes.items()
+        )
+
     def summary(self) -> dict:
         """The figures as a dict (a report's ``dynamics`` entry)."""
         return {

@@ -382,3 +382,21 @@ def row_peak_speeds(job: PlannedJob) -> np.ndarray | None:
     peak = np.zeros(len(job.program))
     np.maximum.at(peak, rows, np.maximum(np.asarray(plan.vp), np.maximum(plan.v0, plan.v1)))
     return peak
+
+
+def parse_bands(text: str) -> np.ndarray | str:
+    """``"auto"`` or speed bands written ``LOW-HIGH[,LOW-HIGH...]`` in mm/s (``"60-95,140-160"``) as
+    ``(k, 2)``; anything else raises :class:`~jaxcnc.errors.JaxcncError` naming the part it cannot read."""
+    t = text.strip()
+    if t == "auto":
+        return t
+    out = []
+    for part in t.split(","):
+        lo, sep, hi = part.strip().partition("-")
+        try:
+            if not sep:
+                raise ValueError
+            out.append((float(lo), float(hi)))
+        except ValueError:
+            raise JaxcncError(f"speed band {part.strip()!r}: write LOW-HIGH in mm/s (e.g. 60-95), or 'auto'") from None
+    return merge_bands(np.asarray(out))
