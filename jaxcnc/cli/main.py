@@ -522,6 +522,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.split import run_split_benchmarks
 
         results["split"] = run_split_benchmarks(repeats=args.repeats)
+    if args.suite in ("all", "vibration"):
+        from jaxcnc.bench.vibration import run_vibration_benchmarks
+
+        results["vibration"] = run_vibration_benchmarks(repeats=args.repeats)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
@@ -779,7 +783,9 @@ def build_parser() -> argparse.ArgumentParser:
         "planned times, every table checked at the tick rate against limits and the programmed path. geometry: "
         "NURBS evaluation against scipy and geomdl, tick generation on curves. player: table playback into sim "
         "and the TCP receiver. planners: topp beside CasADi and toppra on the butterfly. pulsed: the documents' "
-        "14 engraving programs. Every run prints the date, the commit and the load average; JIT compile time "
+        "14 engraving programs. vibration: no shaping, each input shaper and speed-band avoidance on cornered "
+        "parts with a 40 Hz mode (job time, residual vibration, contour error, planning time). Every run prints "
+        "the date, the commit and the load average; JIT compile time "
         "is reported apart. A missing input is an error (exit 2), never replaced by another.",
     )
     sp.add_argument(
@@ -811,7 +817,7 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed", "pbf", "split"),
+        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed", "pbf", "split", "vibration"),
         help="which benchmarks (default: %(default)s)",
     )
     sp.add_argument("--stl", help="pbf: the part (default: the corpus's frameGuide.stl)")
