@@ -4,6 +4,7 @@ end and a sink; ``jaxcnc`` finds them by name from the command line, and reports
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -66,7 +67,8 @@ def _install(tmp_path: Path, entry_points: str) -> dict:
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: jaxcnc-test-plugins\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text(textwrap.dedent(entry_points))
     (site / "test_plugins_mod.py").write_text(PLUGIN_MODULE)
-    (site / "slow_planner.py").write_text((ROOT / "examples" / "slow_planner.py").read_text())
+    for example in ("slow_planner.py", "involute_block.py"):
+        (site / example).write_text((ROOT / "examples" / example).read_text())
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(site), str(ROOT), env.get("PYTHONPATH", "")])
     return env
@@ -83,6 +85,10 @@ ENTRY_POINTS = """
 
     [jaxcnc.sinks]
     counting = test_plugins_mod:open_counting
+
+    [jaxcnc.block_kinds]
+    G2.2 = involute_block:Involute
+    G3.2 = involute_block:Involute
 """
 
 
@@ -167,3 +173,88 @@ def test_registry_lookups():
     with pytest.raises(PluginError, match="unknown widget 'z'; known: a, json"):
         reg.get("z")
     assert issubclass(PluginError, JaxcncError)
+
+
+# ------------------------------------------------------------------------------------- block kinds
+
+R_BASE, T_IN, T_OUT = 10.0, 0.3, 1.2  # a gear flank: base circle radius, involute parameters of its ends
+
+
+def _on_involute(t: float) -> tuple[float, float]:
+    """The counter-clockwise unwinding involute of the base circle about the origin, phase 0, at ``t``."""
+    return (R_BASE * (math.cos(t) + t * math.sin(t)), R_BASE * (math.sin(t) - t * math.cos(t)))
+
+
+def _flank_program() -> str:
+    (sx, sy), (ex, ey) = _on_involute(T_IN), _on_involute(T_OUT)
+    return (
+        "G21 G90 G17\n"
+        f"G0 X{sx:.9f} Y{sy:.9f}\n"
+        "M3 S1\n"
+        f"G3.2 X{ex:.9f} Y{ey:.9f} I{-sx:.9f} J{-sy:.9f} R{R_BASE} F600\n"  # out, turning counter-clockwise
+        f"G2.2 X{sx:.9f} Y{sy:.9f} I{-ex:.9f} J{-ey:.9f} R{R_BASE}\n"  # back in: clockwise
+        "M5\nM2\n"
+    )
+
+
+def test_a_block_kind_plug_in_plans_fanuc_involutes_on_the_involute(installed):
+    """G3.2/G2.2 from the example plug-in (entry points) in a Fanuc program: planned, checked, and every tick of
+    the flank lies on the analytic involute (angle of the radius against the involute's, independent of the
+    plug-in's lowering) within the tolerance."""
+    import numpy as np
+
+    from jaxcnc.format import EventKind, TableFile
+
+    tmp, env = installed
+    prog = tmp / "flank.nc"
+    prog.write_text(_flank_program())
+    out = tmp / "flank.ticks"
+    r = _jaxcnc(env, "plan", str(prog), "-m", str(tmp / "m.toml"), "-o", str(out), "-q", "--dialect", "fanuc")
+    assert r.returncode == 0, r.stderr
+    r = _jaxcnc(env, "check", str(out), "-m", str(tmp / "m.toml"))
+    assert r.returncode == 0 and "path: max deviation" in r.stdout, r.stdout + r.stderr
+    table = TableFile(out)
+    xy = table.positions_mm()[:, :2]
+    blocks = table.events[table.events["kind"] == EventKind.BLOCK]
+    first = int(blocks["tick"][blocks["aux"] == 4][0])  # source line 4: the G3.2; then the G2.2 back, then rest
+    p = xy[first:]
+    rad = np.linalg.norm(p, axis=1)
+    t = np.sqrt(np.maximum(rad**2 / R_BASE**2 - 1, 0))
+    # the involute at radius r lies at angle t - atan(t) (phase 0): the distance off it is r * |angle error|
+    err = np.angle(np.exp(1j * (np.arctan2(p[:, 1], p[:, 0]) - (t - np.arctan(t)))))
+    assert np.all(rad >= R_BASE * math.sqrt(1 + T_IN**2) - 2e-3) and np.all(
+        rad <= R_BASE * math.sqrt(1 + T_OUT**2) + 2e-3
+    )
+    assert np.max(np.abs(rad * err)) <= 1e-3 + 1e-5  # one discrete (1 µm) of quantisation + the lowering
+    # the same words in the LinuxCNC dialect are refused, naming the kind's dialect
+    r = _jaxcnc(env, "plan", str(prog), "-m", str(tmp / "m.toml"), "-o", str(tmp / "x.ticks"), "-q")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "G3.2 (involute interpolation) is not part of the linuxcnc dialect (it is of: fanuc)" in r.stderr
+
+
+def test_block_kind_errors_are_located(monkeypatch, tmp_path):
+    """In-process: the interpreter reports a kind's refusal at the block's word; an end off the involute is
+    refused with the distance; without the kind registered the word is unknown."""
+    sys.path.insert(0, str(ROOT / "examples"))
+    try:
+        from involute_block import Involute
+    finally:
+        sys.path.remove(str(ROOT / "examples"))
+    from jaxcnc.blocks import BLOCK_KINDS
+    from jaxcnc.errors import SourceError
+    from jaxcnc.gcode.dialect import load_dialect
+    from jaxcnc.gcode.interpreter import parse_gcode
+
+    fanuc = load_dialect("fanuc")
+    text = _flank_program()
+    with pytest.raises(SourceError, match="unknown or unsupported word G3.2"):
+        parse_gcode(text, file="f.nc", dialect=fanuc)
+    monkeypatch.setitem(BLOCK_KINDS._items, "G3.2", Involute())
+    monkeypatch.setitem(BLOCK_KINDS._items, "G2.2", Involute())
+    prog = parse_gcode(text, file="f.nc", dialect=fanuc)
+    assert prog.curves is not None and len(prog.curves) == 2
+    bad = text.replace(f"R{R_BASE} F600", f"R{R_BASE * 1.01} F600")
+    with pytest.raises(SourceError, match=r"f.nc:4:1: G3.2: the end point is .* mm off the involute"):
+        parse_gcode(bad, file="f.nc", dialect=fanuc)
+    with pytest.raises(SourceError, match=r"f.nc:4:1: G3.2: needs I, J .* and R"):
+        parse_gcode(text.replace(f" R{R_BASE} F600", " F600"), file="f.nc", dialect=fanuc)

@@ -26,6 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxcnc.blocks import BLOCK_KINDS, BlockCall, BlockKind, chain_error, g_word
+from jaxcnc.blocks import Arc as BlockArc
+from jaxcnc.blocks import Line as BlockLine
 from jaxcnc.errors import SourceError
 from jaxcnc.gcode import fastpath
 from jaxcnc.gcode.dialect import LINUXCNC, Dialect, load_dialect
@@ -172,6 +175,23 @@ _LETTER_REASONS = {
 }
 _AXES = ("X", "Y", "Z")
 _ALLOWED = set("GMFSTNPQXYZIJKRLH")
+_MOTION_GROUP = 1
+
+
+def _block_kind(code: int, dialect: Dialect, block: _Block, w: Word) -> BlockKind | None:
+    """The registered block kind of G code ``code`` (tenths), ``None`` when there is none; an error when its
+    kind does not belong to ``dialect``."""
+    word = g_word(code)
+    if word not in BLOCK_KINDS:
+        return None
+    kind = BLOCK_KINDS.get(word)
+    if kind.dialects is not None and dialect.name not in kind.dialects:
+        raise block.error(
+            w, f"{word} ({kind.name}) is not part of the {dialect.name} dialect (it is of: {', '.join(kind.dialects)})"
+        )
+    return kind
+
+
 _SPLINE_CODES = (50, 51, 52, 62, 10010)
 _SPLINE_NAMES = {50: "G5", 51: "G5.1", 52: "G5.2", 62: "G6.2", 10010: "BSPLINE"}
 # A line that starts (after blanks and a block delete '/') with an O-word. This is what the expression
@@ -227,6 +247,7 @@ class _Block:
         self.m: list[tuple[int, Word]] = []
         self.vals: dict[str, Word] = {}
         self.used: set[str] = {"N"}
+        self.kinds: dict[int, BlockKind] = {}  # the block's plug-in motion words (jaxcnc.blocks), by code
         g_groups: dict[int, Word] = {}
         m_groups: dict[int, Word] = {}
         for w in words:
@@ -239,7 +260,12 @@ class _Block:
                 code = round(w.value * 10) if w.letter == "G" else round(w.value)
                 exact = w.value * 10 if w.letter == "G" else w.value
                 table, groups = (_G_GROUP, g_groups) if w.letter == "G" else (_M_GROUP, m_groups)
-                if abs(exact - code) > 1e-9 or code not in table:
+                kind = None
+                if w.letter == "G" and abs(exact - code) <= 1e-9 and code not in table:
+                    kind = _block_kind(code, dialect, self, w)  # a plug-in's motion word, or None
+                    if kind is not None:
+                        self.kinds[code] = kind
+                if kind is None and (abs(exact - code) > 1e-9 or code not in table):
                     why = None
                     if abs(exact - code) <= 1e-9:
                         why = (_REFUSED_G if w.letter == "G" else _REFUSED_M).get(code)
@@ -248,7 +274,7 @@ class _Block:
                     raise self.error(w, why or f"unknown or unsupported word {w.letter}{w.text}")
                 if w.letter == "G" and code in _SPLINE_NAMES and _SPLINE_NAMES[code] not in dialect.splines:
                     raise self.error(w, f"{_SPLINE_NAMES[code]} is not part of the {dialect.name} dialect")
-                group = table[code]
+                group = _MOTION_GROUP if kind is not None else table[code]
                 if group in groups:
                     other = groups[group]
                     raise self.error(
@@ -432,7 +458,7 @@ class _Interpreter:
         # motion mode; G80 (cancel canned cycle: none ever runs) also cancels the motion mode, as in
         # LinuxCNC, unless the block names one (the "G0 G17 G40 G49 G80 G90" of ISO post headers).
         motion_word = None
-        for code in (0, 10, 20, 30, *_SPLINE_CODES, 800):
+        for code in (0, 10, 20, 30, *_SPLINE_CODES, *b.kinds, 800):
             if (w := b.has_g(code)) is not None and (code != 800 or motion_word is None):
                 if s.nurbs is not None and s.nurbs.kind == "G5.2" and code != 52:
                     raise b.error(w, f"G5.2 NURBS opened at line {s.nurbs.line} is not closed with G5.3")
@@ -601,8 +627,54 @@ class _Interpreter:
             self.emit(Kind.LINE, b.line, end, rapid=True)
         elif s.motion == 10:
             self.emit(Kind.LINE, b.line, end, feed=self.feed_mm_s(b, first))
-        else:
+        elif s.motion in (20, 30):
             self.arc(b, end, first, cw=s.motion == 20)
+        else:
+            self.kind_block(b, end, first)
+
+    def kind_block(self, b: _Block, end: np.ndarray, first: Word) -> None:
+        """A block of a registered kind (:mod:`jaxcnc.blocks`): its pieces emitted as the block's rows."""
+        s = self.s
+        word = g_word(s.motion)
+        kind = BLOCK_KINDS.get(word)
+        params = {}
+        for letter in kind.letters:
+            if (p := b.take(letter)) is not None:
+                params[letter] = p.value * (s.scale if letter in kind.lengths else 1.0)
+        call = BlockCall(word, s.pos.copy(), end.copy(), params, s.plane, self.dialect.name)
+        try:
+            pieces = kind.lower(call)
+        except ValueError as exc:
+            raise b.error(first, f"{word}: {exc}") from None
+        except Exception as exc:  # a plug-in's own failure: one line naming it
+            if (err := BLOCK_KINDS.failed(word, exc)) is None:
+                raise
+            raise err from None
+        gap = chain_error(pieces, call.start_mm, end) if pieces else float(np.linalg.norm(end - call.start_mm))
+        if gap > 1e-9:
+            raise b.error(
+                first,
+                f"{word} ({kind.name}): its pieces do not join the block's start to its end "
+                f"(gap {gap:.3g} mm; a fault of the block kind)",
+            )
+        feed = self.feed_mm_s(b, first)
+        for p in pieces:
+            if isinstance(p, BlockLine):
+                self.emit(Kind.LINE, b.line, p.end_mm, feed=feed)
+            elif isinstance(p, BlockArc):
+                plane, s.plane = s.plane, p.plane
+                try:
+                    self.emit(Kind.ARC, b.line, p.end_mm, center=p.center_mm, turn=p.turn, feed=feed)
+                finally:
+                    s.plane = plane
+            else:
+                curve = (p.degree, p.points_mm, p.weights, p.knots)
+                try:
+                    make_curve_table([curve])
+                except ValueError as exc:
+                    raise b.error(first, f"{word} ({kind.name}): {str(exc).removeprefix('curve 0: ')}") from None
+                s.curves.append(curve)
+                self.emit(Kind.CURVE, b.line, p.end_mm, feed=feed, curve=len(s.curves) - 1)
 
     def arc(self, b: _Block, end_prog: np.ndarray, first: Word, cw: bool) -> None:
         """G2/G3 in the active plane; motion along the plane's normal makes a helix."""

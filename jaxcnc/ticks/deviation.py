@@ -284,9 +284,9 @@ class CurveDistance:
         knots = np.asarray(knots, np.float64)
         self.degree = p = int(degree)
         hom = np.concatenate([points * weights[:, None], weights[:, None]], axis=1)
-        self._h = [BSpline(knots, hom, p)]
-        for k in (1, 2):
-            self._h.append(self._h[-1].derivative() if p >= k else None)
+        # derivatives evaluated span by span (``nu``): a B-spline with an interior knot repeated ``p`` times is
+        # only C0 there, and scipy refuses to build its derivative as one spline
+        self._h = BSpline(knots, hom, p)
         self.u0, self.u1 = float(knots[p]), float(knots[-p - 1])
         # samples: per non-empty knot span, by the length of its control polygon
         m = points.shape[0]
@@ -306,7 +306,8 @@ class CurveDistance:
     def eval(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, first and second derivative ``(m, 3)`` of the curve at parameters ``u``."""
         u = np.clip(np.asarray(u, np.float64), self.u0, self.u1)
-        h, h1, h2 = (np.zeros((u.size, 4)) if f is None else f(u) for f in self._h)
+        p = self.degree
+        h, h1, h2 = (self._h(u, nu=k) if p >= k else np.zeros((u.size, 4)) for k in (0, 1, 2))
         w, w1, w2 = h[:, 3:], h1[:, 3:], h2[:, 3:]
         c = h[:, :3] / w
         c1 = (h1[:, :3] - c * w1) / w
