@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxcnc.dynamics import Mode, simulate_table
 from jaxcnc.dynamics.shaped import plan_dynamic_file
 from jaxcnc.errors import JaxcncError
 from jaxcnc.format import TableFile
 from jaxcnc.machine import load_machine
-from jaxcnc.planners.shaping import SHAPER_NAMES, fir_taps, make_shaper, merge_bands, resonant_bands
+from jaxcnc.planners.shaping import SHAPER_NAMES, fir_taps, make_shaper, merge_bands, parse_bands, resonant_bands
 from tests.test_dynamics import VIB_MACHINE, cornered_gcode
 
 
@@ -148,3 +150,50 @@ def test_cli_plans_shaped_checks_dynamics_draws_and_refuses_bad_bands(vib, capsy
     assert said.startswith("OK ") and "residual vibration after 6 stops" in said and png.stat().st_size > 10_000
     assert main(["plan", str(part), "-m", m, "-o", str(out), "--avoid-bands", "30-x"]) == 2
     assert "speed band '30-x'" in capsys.readouterr().err
+
+
+def test_laser_events_follow_the_shaped_tool(vib):
+    """The beam goes on where the shaped motion starts and off where the shaped tool reaches the corner it was
+    switched off at (events at rest points move to the end of their hold)."""
+    from jaxcnc.format import EventKind
+
+    machine, _, folder = vib
+    part = folder / "laser.ngc"
+    part.write_text("G21 G90 G61\nG0 X0 Y0\nM3 S500\nG1 X20 Y0 F6000\nM5\nG0 X20 Y10\nM3 S800\nG1 X0 Y10\nM5\nM2\n")
+    plan_dynamic_file(part, machine, folder / "l.ticks", "zvd", progress=False)
+    t = TableFile(folder / "l.ticks")
+    p = t.exact_mm(0, t.header.n_rows)
+    ev = t.events[t.events["kind"] == EventKind.LASER]
+    on = ev["tick"][ev["value"] > 0]
+    off = ev["tick"][ev["value"] == 0]
+    assert on.size == 2 and off.size == 2
+    hold = t.header.meta["shaper_hold_ticks"]
+    for k, where in zip(off, ([20, 0], [0, 10]), strict=True):  # off: the shaped tool has arrived
+        assert np.linalg.norm(p[k] - where) < 1e-5 and np.linalg.norm(p[k - hold // 2] - where) > 1e-2
+    for k, where in zip(on, ([0, 0], [20, 10]), strict=True):  # on: still there, the move begins at once
+        assert np.linalg.norm(p[k] - where) < 1e-5 and np.linalg.norm(p[k + hold // 2] - where) > 1e-2
+
+
+def test_bench_case_runs():
+    import tempfile
+    from pathlib import Path
+
+    from jaxcnc.bench.vibration import MACHINE, run_case
+    from jaxcnc.machine import parse_machine
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "m.toml").write_text(MACHINE)
+        c = run_case(Path(tmp), parse_machine(MACHINE, str(Path(tmp) / "m.toml")), "hexagon", "zv")
+    assert c["check_ok"] and c["n_stops"] == 6 and c["residual_max_mm"] < 1e-3
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet="0123456789.-, eauto", max_size=20))
+def test_parse_bands_fuzz(text):
+    """Any text is a band list, 'auto', or one JaxcncError line — never another exception."""
+    try:
+        out = parse_bands(text)
+    except JaxcncError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert isinstance(out, str) or (out.ndim == 2 and np.all(out[:, 0] < out[:, 1]))

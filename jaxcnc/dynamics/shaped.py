@@ -95,7 +95,7 @@ class ShapedSampler:
         at_rest = (i < self.rest.size) & (self.rest[np.minimum(i, self.rest.size - 1)] == ticks)
         held = ticks + self.hold * i
         limit = np.concatenate([self._last_copy, [self.n_rows - 1]])[i]
-        moved = np.minimum(held + self.shift, limit)
+        moved = np.where(ticks == 0, 0, np.minimum(held + self.shift, limit))  # the job's start is a rest too
         return np.where(at_rest, self._last_copy[np.minimum(i, self.rest.size - 1)], moved)
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
