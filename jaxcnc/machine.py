@@ -105,6 +105,22 @@ class ScannerConfig:
 
 
 @dataclass(frozen=True)
+class GalvoConfig:
+    """The scan head of a scanner-only (galvo marking) machine: how the mirrors follow the board's command.
+
+    The machine's x and y axes are the beam at the field, driven by a galvo board that executes vector lists at
+    ``[machine] tick_hz`` (the board clock). The head is a second-order tracking loop per axis
+    (:class:`jaxcnc.scanner.head.HeadModel`, ``docs/scanner.md``): ``tracking_error_s`` τ (at constant speed the
+    mirror is τ behind the command), ``damping`` ζ, ``mirror_a_max_mm_s2`` the mirrors' acceleration limit at the
+    field (their inertia against the drive's torque).
+    """
+
+    tracking_error_s: float
+    mirror_a_max_mm_s2: float
+    damping: float = 1.0
+
+
+@dataclass(frozen=True)
 class MachineConfig:
     """A validated, immutable machine description."""
 
@@ -119,6 +135,8 @@ class MachineConfig:
     #: The planner's name (``[machine] planner``): a contour planner, or on a pulsed machine a pulse planner;
     #: ``None``: the default. Checked against the registries when planning (see :func:`key_error`).
     planner: str | None = None
+    #: ``[galvo]``: a scanner-only machine whose x, y are the beam, with its scan-head model (docs/scanner.md).
+    galvo: GalvoConfig | None = None
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -221,6 +239,23 @@ def _m4_curve(speed: tuple[float, ...] | None, power: tuple[float, ...] | None) 
     return None
 
 
+def _tracking_error(v: float) -> str | None:
+    if (e := _positive(v)) is not None:
+        return e
+    return None if v <= 0.01 else f"{v:g} s is slower than any galvo (at most 10 ms); was it given in µs or ms?"
+
+
+def _damping(v: float) -> str | None:
+    ok = math.isfinite(v) and 0.1 <= v <= 2.0
+    return None if ok else "must lie in [0.1, 2] (a galvo's tracking loop is tuned near 0.7 to 1)"
+
+
+def _mirror_accel(v: float) -> str | None:
+    if (e := _positive(v)) is not None:
+        return e
+    return None if v <= 1e10 else f"{v:g} mm/s² is beyond any galvo mirror (1e10 mm/s² at the field)"
+
+
 def _name(v: str) -> str | None:
     return None if v.strip() == v and v else "must be a non-empty name without surrounding spaces"
 
@@ -279,8 +314,15 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "rotation_deg": ("number", False, 0.0, _finite),
         "offset_mm": ("number_list", False, (0.0, 0.0), None),
     },
+    "galvo": {
+        "tracking_error_s": ("number", True, None, _tracking_error),
+        "mirror_a_max_mm_s2": ("number", True, None, _mirror_accel),
+        "damping": ("number", False, 1.0, _damping),
+    },
 }
-_TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner")
+_TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner", "galvo")
+#: Axes a galvo board drives: the beam at the field (x, y) and a focus shifter (z).
+GALVO_AXES = ("x", "y", "z")
 
 
 class _Loader:
@@ -451,6 +493,25 @@ class _Loader:
                 rotation_deg=sc["rotation_deg"],
                 offset_mm=sc["offset_mm"],
             )
+        galvo = None
+        if "galvo" in doc:
+            g = self.section("galvo", doc["galvo"], "galvo")
+            if scanner is not None:
+                raise self.fail(
+                    "galvo", None, "[galvo] declares a scanner-only machine (x, y are the beam); a stage + scanner "
+                    "split ([scanner]) has no scan-head model yet: remove one of the two tables"
+                )  # fmt: skip
+            if extra := [a.name for a in axes if a.name not in GALVO_AXES]:
+                raise self.fail(
+                    f"axes.{extra[0]}", None, f"a galvo machine drives x, y (the beam) and z (focus), not {extra[0]}"
+                )
+            if g["tracking_error_s"] < 2.0 / m["tick_hz"]:
+                raise self.fail(
+                    "galvo", "tracking_error_s",
+                    f"{g['tracking_error_s']:g} s is shorter than two board ticks (tick_hz {m['tick_hz']:g}): "
+                    "the model cannot resolve it",
+                )  # fmt: skip
+            galvo = GalvoConfig(**g)
         return MachineConfig(
             name=m["name"],
             tick_hz=m["tick_hz"],
@@ -461,6 +522,7 @@ class _Loader:
             scanner=scanner,
             source=self.file,
             planner=m["planner"],
+            galvo=galvo,
         )
 
 
