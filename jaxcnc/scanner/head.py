@@ -18,11 +18,14 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.errors import MachineFileError
+from jaxcnc.machine import MachineConfig
 
 
 @dataclass(frozen=True)
 class HeadModel:
-    """A scan head's tracking model (``docs/scanner.md``; machine file ``[scanner]`` keys of the same names)."""
+    """A scan head's tracking model (``docs/scanner.md``; machine file ``[galvo]``: ``tracking_error_s``,
+    ``damping``, ``mirror_a_max_mm_s2``)."""
 
     tracking_error_s: float = 150e-6
     damping: float = 1.0
@@ -40,12 +43,18 @@ class HeadModel:
         return w * math.sqrt(1 - 2 * z * z + math.sqrt((1 - 2 * z * z) ** 2 + 1)) / (2 * math.pi)
 
     @classmethod
-    def from_machine(cls, machine) -> HeadModel:
-        """The machine's ``[scanner]`` head keys, or the defaults where the machine has none."""
-        sc = getattr(machine, "scanner", None)
-        if sc is None or getattr(sc, "tracking_error_s", None) is None:
-            return cls()
-        return cls(sc.tracking_error_s, sc.damping, sc.mirror_a_max_mm_s2)
+    def from_machine(cls, machine: MachineConfig) -> HeadModel:
+        """The head of a scanner-only machine, from its ``[galvo]`` table.
+
+        Raises :class:`~jaxcnc.errors.MachineFileError` naming the file when the machine has no ``[galvo]``
+        table (no default head stands in for a missing one).
+        """
+        g = machine.galvo
+        if g is None:
+            raise MachineFileError(
+                machine.source, "galvo", f"machine {machine.name!r} has no [galvo] table (the scan-head model)"
+            )
+        return cls(g.tracking_error_s, g.damping, g.mirror_a_max_mm_s2)
 
 
 @jax.jit

@@ -1,0 +1,97 @@
+"""The ``[galvo]`` machine table (issue 18): a scanner-only machine's scan-head model, every key validated."""
+
+from __future__ import annotations
+
+import pytest
+
+from jaxcnc.cli.main import main
+from jaxcnc.errors import MachineFileError
+from jaxcnc.machine import parse_machine
+from jaxcnc.scanner.head import HeadModel
+
+BASE = """[machine]
+name = "galvo"
+tick_hz = 100000
+discrete_mm = 0.001
+[axes.x]
+v_max = 5000.0
+a_max = 2000000.0
+min = -50.0
+max = 50.0
+[axes.y]
+v_max = 5000.0
+a_max = 2000000.0
+min = -50.0
+max = 50.0
+[path]
+feed = 1000.0
+rapid = 5000.0
+"""
+GALVO = (
+    BASE
+    + """[galvo]
+tracking_error_s = 120e-6
+mirror_a_max_mm_s2 = 4e6
+damping = 0.8
+"""
+)
+
+
+def test_galvo_table_builds_the_head_model():
+    m = parse_machine(GALVO, "g.toml")
+    assert m.galvo is not None and m.scanner is None
+    head = HeadModel.from_machine(m)
+    assert (head.tracking_error_s, head.damping, head.a_max_mm_s2) == (120e-6, 0.8, 4e6)
+    d = parse_machine(GALVO.replace("damping = 0.8\n", ""), "g.toml")
+    assert HeadModel.from_machine(d).damping == 1.0  # the documented default: critically damped
+
+
+def test_a_machine_without_galvo_table_has_no_head():
+    with pytest.raises(MachineFileError, match=r"g\.toml: \[galvo\] machine 'galvo' has no \[galvo\] table"):
+        HeadModel.from_machine(parse_machine(BASE, "g.toml"))
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "line", "message"),
+    [
+        ("damping = 0.8", "dampign = 0.8", 21, r"\[galvo.dampign\] unknown key 'dampign'; known keys here: "),
+        ("damping = 0.8", "damping = 5.0", 21, r"\[galvo.damping\] 5.0: must lie in \[0.1, 2\]"),
+        ("damping = 0.8", "damping = 0.0", 21, r"\[galvo.damping\] 0.0: must lie in \[0.1, 2\]"),
+        ("tracking_error_s = 120e-6", "tracking_error_s = 150", 19, r"150 s is slower than any galvo"),
+        ("tracking_error_s = 120e-6", "tracking_error_s = -1e-4", 19, r"must be a positive finite number"),
+        ("tracking_error_s = 120e-6", "tracking_error_s = 1e-5", 19, r"shorter than two board ticks"),
+        ("tracking_error_s = 120e-6", "tracking_error_s = '1e-4'", 19, r"expected a number, got '1e-4'"),
+        ("mirror_a_max_mm_s2 = 4e6", "mirror_a_max_mm_s2 = 0", 20, r"must be a positive finite number"),
+        ("mirror_a_max_mm_s2 = 4e6", "mirror_a_max_mm_s2 = 4e12", 20, r"beyond any galvo mirror"),
+        ("mirror_a_max_mm_s2 = 4e6\n", "", 18, r"\[galvo\] missing required key 'mirror_a_max_mm_s2'"),
+    ],
+)
+def test_galvo_key_errors_name_file_line_and_cause(old, new, line, message):
+    with pytest.raises(MachineFileError, match=message) as info:
+        parse_machine(GALVO.replace(old, new), "g.toml")
+    assert info.value.line == line and str(info.value).startswith(f"g.toml:{line}: ")
+
+
+def test_galvo_refuses_a_split_machine_and_non_beam_axes():
+    split = GALVO + '[axes.u]\nv_max = 5000.0\na_max = 1e6\nmin = -25.0\nmax = 25.0\n[scanner]\naxes = ["u"]\n'
+    split += "field_mm = [50.0]\nscale = [1.0]\noffset_mm = [0.0]\n"
+    with pytest.raises(MachineFileError, match=r"g.toml:18: \[galvo\] \[galvo\] declares a scanner-only machine"):
+        parse_machine(split, "g.toml")
+    extra = GALVO + "[axes.a]\nv_max = 50.0\na_max = 100.0\nmin = -5.0\nmax = 5.0\n"
+    with pytest.raises(MachineFileError, match=r"g.toml:22: \[axes.a\] a galvo machine drives x, y"):
+        parse_machine(extra, "g.toml")
+
+
+def test_plan_on_a_galvo_machine(tmp_path, capsys):
+    """A scanner-only machine plans like any other (its table is the beam path the board executes); a bad
+    [galvo] key is a one-line error with exit status 2."""
+    m = tmp_path / "g.toml"
+    m.write_text(GALVO)
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G21 G90\nG0 X0 Y0\nM3 S100\nG1 X5 Y0 F60000\nG1 X5 Y3\nM5\nM2\n")
+    assert main(["plan", str(prog), "-m", str(m), "-o", str(tmp_path / "p.ticks"), "-q"]) == 0
+    m.write_text(GALVO.replace("damping = 0.8", "damping = 9"))
+    capsys.readouterr()
+    assert main(["plan", str(prog), "-m", str(m), "-o", str(tmp_path / "q.ticks"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "g.toml:21: [galvo.damping] 9.0: must lie in [0.1, 2]" in err[0]
