@@ -148,6 +148,9 @@ def test_cli_plans_shaped_checks_dynamics_draws_and_refuses_bad_bands(vib, capsy
     assert main(["check", str(out), "-m", m, "--dynamics", "--dynamics-plot", str(png)]) == 0
     said = capsys.readouterr().out
     assert said.startswith("OK ") and "residual vibration after 6 stops" in said and png.stat().st_size > 10_000
+    assert main(["plan", str(part), "-m", m, "-o", str(out), "-r", str(folder / "r.json")]) == 0  # plain plan
+    assert "simulated axes: residual vibration after 6 stops" in capsys.readouterr().out
+    assert "max_residual_mm" in (folder / "r.json").read_text()
     assert main(["plan", str(part), "-m", m, "-o", str(out), "--avoid-bands", "30-x"]) == 2
     assert "speed band '30-x'" in capsys.readouterr().err
 

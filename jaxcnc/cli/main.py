@@ -166,6 +166,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
         allow_repeats=args.allow_repeats,
         input_options=_drawing_options(args),
     )
+    if "n_points" not in report and "split" not in report:  # a contour table on a machine with axis modes
+        from jaxcnc.dynamics.simulate import table_dynamics
+
+        if (dyn := table_dynamics(args.output, args.machine)) is not None:
+            report["dynamics"] = dyn
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
     if not args.quiet and "n_points" in report:
@@ -197,6 +202,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
             f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}; at most "
             f"{report['max_path_deviation_mm'] * 1e3:.3g} µm from the programmed path "
             f"(tolerance {report['path_tolerance_mm'] * 1e3:.3g} µm)"
+        )
+    if not args.quiet and "dynamics" in report:
+        d = report["dynamics"]
+        print(
+            f"  simulated axes: residual vibration after {d['n_stops']} stops max {d['max_residual_mm'] * 1e3:.3g} "
+            f"µm, contour error max {d['max_contour_mm'] * 1e3:.3g} µm (--shaper, docs/vibration.md)"
         )
     if not args.quiet and "split" in report:
         print(

@@ -18,6 +18,7 @@ per-tick arrays are kept only when asked (``keep=True``, for pictures).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -183,3 +184,14 @@ def simulate_table(
         commanded=np.vstack(kept_u) if keep else None,
         error=np.vstack(kept_e) if keep else None,
     )
+
+
+def table_dynamics(table_path: str | Path, machine: MachineConfig | str | Path) -> dict | None:
+    """The simulated figures (:meth:`Simulation.summary`) of the table at ``table_path`` on ``machine``, or
+    ``None`` when no axis of the machine has modes (a report's ``dynamics`` entry)."""
+    from jaxcnc.machine import load_machine
+
+    m = machine if isinstance(machine, MachineConfig) else load_machine(machine)
+    if not any(a.modes for a in m.axes):
+        return None
+    return simulate_table(TableFile(table_path), m).summary()
