@@ -59,7 +59,12 @@ def test_player_hold_resume_and_override_on_the_path_within_limits(tmp_path):
     # on at the start, off at rest in the hold, on again before moving, off at M5
     assert list(laser["value"] > 0) == [True, False, True, False]
     off, on = int(laser["tick"][1]), int(laser["tick"][2])
-    assert np.all(np.diff(x[off : on + 1]) == 0)  # the laser was off only while at rest
+    step = np.diff(x)
+    cruise = step[off - 100 : off - 1]
+    assert np.all(cruise == cruise[0]) and step[off - 1] == cruise[0]  # off before the drives slowed (issue 16)
+    assert np.all(step[on - 10 : on] == 0)  # back on where the drives leave the rest
+    played = sink.laser.played
+    assert np.all(played[off:on] == 0) and np.all(played[5:off] == 800.0)  # the power channel as played
     v_half = np.diff(x[-30_000:-20_000]).mean() * m.discrete_mm * m.tick_hz
     assert abs(v_half - 25.0) < 0.5  # the 50 mm/s cruise at 50 % override
 

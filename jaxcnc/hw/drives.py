@@ -58,6 +58,10 @@ class DriveClock:
         self.held_ticks = 0  # servo ticks spent at rest waiting for rows
         self._down = False  # ramping down (or at rest) for want of rows
         self.stopping = False  # stop(): ramping down for good
+        #: For the rows the last :meth:`run` / :meth:`run_to_rest` took: True where taken at the planned rate.
+        #: A row taken while the rate ramps (underrun, stop) is played dark: the laser goes off before the
+        #: drives slow, and comes back with the planned rate.
+        self.last_lit = np.zeros(0, bool)
 
     def stop(self) -> None:
         """Stop for good (an abort, a lost player): from now the rate ramps to 0 within the buffered
@@ -74,11 +78,13 @@ class DriveClock:
 
     def run_to_rest(self, positions: bool = False, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
         """After :meth:`stop`: run the servo ticks of the ramp-down (virtually); rows taken and positions."""
-        taken, pos = [], []
+        taken, pos, lit = [], [], []
         while not self.at_rest:
             t, p = self.run(chunk, False, positions)
             taken.append(t)
             pos.append(p)
+            lit.append(self.last_lit)
+        self.last_lit = np.concatenate(lit) if lit else np.zeros(0, bool)
         empty = np.zeros((0, self.n_axes))
         return (
             np.concatenate(taken) if taken else empty.astype(np.int32),
@@ -135,6 +141,7 @@ class DriveClock:
         """
         taken: list[np.ndarray] = []
         pos: list[np.ndarray] = []
+        lit: list[np.ndarray] = []
         left = ticks
         while left > 0:
             keep = (0 if ended else self.reserve) + (self.frac > 0.0)  # an interpolation needs the next row
@@ -142,6 +149,7 @@ class DriveClock:
                 k = min(left, self.queued - keep)  # as planned: one row per tick, vectorised
                 rows = self._take(k)
                 taken.append(rows)
+                lit.append(np.ones(k, bool))
                 if positions:
                     p = rows.astype(np.float64)
                     if self.frac > 0.0:
@@ -169,12 +177,15 @@ class DriveClock:
                 if positions:
                     pos.append(np.repeat(self._position()[None, :], left, axis=0))
                 break
+            planned = target == 1.0 and self.rate == 1.0
             rows, p = self._step(target, ended)
             if rows is not None:
                 taken.append(rows)
+                lit.append(np.full(rows.shape[0], planned))
             if positions:
                 pos.append(p[None, :])
             left -= 1
+        self.last_lit = np.concatenate(lit) if lit else np.zeros(0, bool)
         empty = np.zeros((0, self.n_axes))
         return (
             np.concatenate(taken) if taken else empty.astype(np.int32),

@@ -12,11 +12,17 @@ table re-sampled by :class:`~jaxcnc.hw.timewarp.TimeWarp`, its rate moving to th
 
 Controlled stop (Ctrl-C, or :meth:`Player.request_stop`): a hold that ends the play — the drives
 stop on the path, at rest, within the acceleration limits, after the rows already buffered plus
-the hold distance; the laser is switched off there.
+the hold distance.
+
+The laser: sinks whose ``write`` takes a ``power`` argument get each row's power, the table's power channel
+(``docs/laser.md``; a version 1 table: its laser events held). On a hold or a stop the laser goes off at
+the first re-sampled row, before the drives slow (a ``laser`` off event and power 0), and comes back
+(an on event, the table's power; M4 scaled by the rate) when the drives move again.
 """
 
 from __future__ import annotations
 
+import inspect
 import signal
 import threading
 import time
@@ -108,7 +114,15 @@ class Player:
         return 0.0 if self._held or self._stop.is_set() else self._override
 
     # ---- playing ---------------------------------------------------------------------------------
-    def _send(self, first: int, rows: np.ndarray, events: np.ndarray, progress, interruptible: bool = False) -> int:
+    def _send(
+        self,
+        first: int,
+        rows: np.ndarray,
+        events: np.ndarray,
+        progress,
+        interruptible: bool = False,
+        power: np.ndarray | None = None,
+    ) -> int:
         """Write ``rows`` for ticks ``first ..`` as the sink makes room, with the events among them.
 
         Returns the rows written: all of them, or with ``interruptible`` those written before a
@@ -126,7 +140,10 @@ class Player:
                 continue
             n = min(room, rows.shape[0] - done)
             lo, hi = np.searchsorted(events["tick"], [first + done, first + done + n])
-            self.sink.write(first + done, rows[done : done + n], events[lo:hi])
+            if self._takes_power:
+                self.sink.write(first + done, rows[done : done + n], events[lo:hi], power[done : done + n])
+            else:
+                self.sink.write(first + done, rows[done : done + n], events[lo:hi])
             done += n
         return done
 
@@ -138,6 +155,20 @@ class Player:
         moved["tick"] = out + np.searchsorted(taus, moved["tick"], side="left")
         return moved
 
+    def _warped_power(self, taus: np.ndarray, tau0: float, dark: bool) -> np.ndarray:
+        """Power of the re-sampled rows at table times ``taus``: 0 while dark; else the table's power at the
+        row each falls in, scaled by the rate (table ticks per output tick) where the table runs M4."""
+        if dark or taus.size == 0:
+            return np.zeros(taus.size, np.float32)
+        h = self.table.header
+        idx = np.clip(np.floor(taus).astype(np.int64), 0, h.n_rows - 1)
+        lo, hi = int(idx.min()), int(idx.max()) + 1
+        base = self.table.read_power(lo, hi)[idx - lo].astype(np.float64)
+        las = self.table.events[self.table.events["kind"] == EventKind.LASER]
+        mode = np.r_[0, las["aux"].astype(np.int64)][np.searchsorted(las["tick"], idx, side="right")]
+        rate = np.clip(np.diff(np.concatenate([[tau0], taus])), 0.0, 1.0)
+        return np.where(mode == 4, base * rate, base).astype(np.float32)
+
     def _laser_event(self, tick: int, power: float, mode: int) -> np.ndarray:
         e = np.zeros(1, EVENT_DTYPE)
         e["tick"], e["kind"], e["aux"], e["value"] = tick, EventKind.LASER, mode, power
@@ -147,13 +178,15 @@ class Player:
         """Play to the end, or until a stop is requested (then ramp down and stop)."""
         table, sink = self.table, self.sink
         h = table.header
+        self._takes_power = takes_power(sink)
         t0 = time.perf_counter()
         sink.open(h)
         out = 0  # output ticks sent (the sink's tick numbers)
         row = 0  # table rows played, while not warped
         warp: TimeWarp | None = None
         laser = (0.0, 0)  # the table's laser state at the last row sent: (power, mode)
-        parked = False  # a hold switched the laser off
+        parked = False  # a hold brought the drives to rest
+        dark = False  # a hold or stop switched the laser off (before the drives slowed)
         stopped = False
         try:
             while True:
@@ -162,7 +195,8 @@ class Player:
                         break
                     if self.commanded_rate == 1.0 or self.a_max is None:
                         n = min(self.chunk_rows, h.n_rows - row)
-                        k = self._send(out, table.read_positions(row, row + n), table.events, progress, True)
+                        power = table.read_power(row, row + n) if self._takes_power else None
+                        k = self._send(out, table.read_positions(row, row + n), table.events, progress, True, power)
                         lo, hi = np.searchsorted(table.events["tick"], [row, row + k])
                         laser = _laser_state(table.events[lo:hi], laser)
                         row, out = row + k, out + k
@@ -175,27 +209,32 @@ class Player:
                     stopped = True
                     break
                 target = self.commanded_rate
-                if target > 0.0 and parked and warp.rate == 0.0:  # leaving a hold: the laser first
-                    sink_ev = self._laser_event(out, *laser) if laser[0] > 0 else np.zeros(0, EVENT_DTYPE)
-                    parked = False
-                else:
-                    sink_ev = np.zeros(0, EVENT_DTYPE)
+                sink_ev = np.zeros(0, EVENT_DTYPE)
+                if target > 0.0 and dark:  # leaving a hold: the laser back on as the drives move again
+                    if laser[0] > 0:
+                        sink_ev = self._laser_event(out, *laser)
+                    dark = parked = False
+                elif target == 0.0 and not dark:  # a hold or stop begins: the laser off before the drives slow
+                    if laser[0] > 0:
+                        sink_ev = self._laser_event(out, 0.0, 0)
+                    dark = True
                 warp.command(target)
                 tau0 = warp.tau
                 rows = warp.rows(self.warp_chunk_rows)
                 taus = warp.last_taus
                 events = self._warped_events(taus, tau0, out) if rows.shape[0] else np.zeros(0, EVENT_DTYPE)
                 laser = _laser_state(events, laser)
+                if dark:  # the table's laser events stay in force for later, but nothing fires while dark
+                    events = events[events["kind"] != EventKind.LASER]
                 if warp.rate == 0.0 and target == 0.0 and not parked and rows.shape[0]:
-                    parked = True  # at rest: the laser off (after the chunk's own events)
+                    parked = True  # at rest
                     if self._stop.is_set():
                         stopped = True
                     else:
                         self.holds += 1
-                    if laser[0] > 0:
-                        events = np.concatenate([events, self._laser_event(out + rows.shape[0] - 1, 0.0, 0)])
                 events = np.sort(np.concatenate([sink_ev, events]), order="tick", kind="stable")
-                k = self._send(out, rows, events, progress)
+                power = self._warped_power(taus, tau0, dark) if self._takes_power else None
+                k = self._send(out, rows, events, progress, power=power)
                 out += k
                 if stopped:
                     break
@@ -212,6 +251,14 @@ class Player:
             table_time_s=max(sink.executed_tick(), 0) / h.tick_hz,  # the motion played
             stopped=stopped,
         )
+
+
+def takes_power(sink: Sink) -> bool:
+    """Whether ``sink.write`` takes the rows' ``power`` (the laser channel); older sinks get events only."""
+    try:
+        return "power" in inspect.signature(sink.write).parameters
+    except (TypeError, ValueError):
+        return False
 
 
 def abort_sink(sink: Sink) -> None:

@@ -34,13 +34,15 @@ import signal
 import socket
 import sys
 import time
+import zlib
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from jaxcnc.format import EventKind
+from jaxcnc.format import EVENT_DTYPE, EventKind
 from jaxcnc.hw.drives import DriveClock
+from jaxcnc.hw.laser import LaserOutput
 from jaxcnc.hw.sinks.record import RowRecorder
 from jaxcnc.hw.stream import (
     ACK,
@@ -119,6 +121,12 @@ class Receiver:
         self.recorder: RowRecorder | None = None
         self._events: deque[np.ndarray] = deque()
         self.laser_cmd = 0.0  # the laser power the table commands at the executed tick
+        self.power = LaserOutput(keep=False)  # the power channel: queued beside the rows, played, hashed
+        self.power_seen = False  # the player sends the power channel (DATA frames with POWER)
+        self.events_crc = 0  # CRC-32 of every executed event record, in order
+        self.events_run = 0
+        self._power_chunks: list[np.ndarray] | None = [] if record else None
+        self._event_chunks: list[np.ndarray] | None = [] if record else None
         self.last_owner_frame = time.monotonic()
         self.stats = {
             "frames": 0,
@@ -153,9 +161,12 @@ class Receiver:
 
     @property
     def laser(self) -> float:
-        """The laser output: the table's command, but off while the drives wait at rest and after a stop."""
+        """The laser output: the power channel as played (dark while the drives ramp or wait); for a player that
+        sends no power, the table's command — off while the drives wait at rest and after a stop."""
         if self.stopped or (self.clock is not None and self.clock.rate == 0.0 and not self.done):
             return 0.0
+        if self.power_seen:
+            return 0.0 if self.done else self.power.output
         return self.laser_cmd
 
     def free(self) -> int:
@@ -279,6 +290,9 @@ class Receiver:
         reserve = self.capacity // 4
         self.clock = DriveClock(self.n_axes, self.tick_hz, self.a_max, reserve, self.capacity // 2)
         self.recorder = RowRecorder(self.n_axes, self.record_path)
+        self.power, self.power_seen, self.events_crc, self.events_run = LaserOutput(keep=False), False, 0, 0
+        if self.record_path:
+            self._power_chunks, self._event_chunks = [], []
         return Reply(self.reply(WELCOME, nonce=f.nonce), owner=True)
 
     def owner_gone(self, peer) -> None:
@@ -296,6 +310,9 @@ class Receiver:
             self.stats["bad_frames"] += 1
         elif f.tick == self.next_tick and f.count <= self.free():
             self.clock.push(np.array(f.rows))
+            if f.power is not None:
+                self.power_seen = True
+            self.power.push(np.zeros(f.count, np.float32) if f.power is None else f.power)
             if f.events is not None and len(f.events):
                 self._events.append(np.array(f.events))
             self.next_tick += f.count
@@ -309,6 +326,11 @@ class Receiver:
         while self._events and self._events[0]["tick"][0] <= self.executed:
             ev = self._events[0]
             k = int(np.searchsorted(ev["tick"], self.executed, side="right"))
+            run = ev[:k]
+            self.events_crc = zlib.crc32(np.ascontiguousarray(run).tobytes(), self.events_crc)
+            self.events_run += k
+            if self._event_chunks is not None:
+                self._event_chunks.append(np.array(run))
             laser = ev[:k][ev["kind"][:k] == EventKind.LASER]
             if laser.size:
                 self.laser_cmd = float(laser["value"][-1])
@@ -334,7 +356,13 @@ class Receiver:
         taken, _ = self.clock.run(due, all_in, positions=False)
         self.servo += due
         self.recorder.append(taken)
+        self._play_power(self.clock.last_lit)
         self._apply_events()
+
+    def _play_power(self, lit: np.ndarray) -> None:
+        played = self.power.take(lit)
+        if self._power_chunks is not None:
+            self._power_chunks.append(played)
 
     def stop(self, now: float | None = None) -> None:
         """Stop for good: the laser off at once, the drives ramped down on the path within the buffer."""
@@ -350,6 +378,8 @@ class Receiver:
             self.clock.stop()
             taken, _ = self.clock.run_to_rest()
             self.recorder.append(taken)
+            self._play_power(np.zeros(taken.shape[0], bool))  # the ramp-down is dark
+        self.power.drop()
         self._apply_events()
 
     def summary(self) -> dict:
@@ -357,6 +387,11 @@ class Receiver:
         if self.recorder is not None:
             self.recorder.close()
             self.recorder = None
+            if self._power_chunks is not None:  # beside the rows: NAME.power.npy and NAME.events.npy
+                base = str(self.record_path).removesuffix(".npy")
+                np.save(base + ".power.npy", np.concatenate(self._power_chunks or [np.zeros(0, "<f4")]))
+                np.save(base + ".events.npy", np.concatenate(self._event_chunks or [np.zeros(0, EVENT_DTYPE)]))
+                self._power_chunks = self._event_chunks = None
         c = self.clock
         drives = {"underruns": c.underruns, "hard_stops": c.hard_stops, "held_ticks": c.held_ticks} if c else {}
         return {
@@ -365,6 +400,11 @@ class Receiver:
             "done": self.done,
             "at_rest": self.at_rest,
             "laser": self.laser,
+            "power_crc": self.power.crc,
+            "power_played": self.power.n_played,
+            "dark_rows": self.power.n_dark,
+            "events_crc": self.events_crc,
+            "events_run": self.events_run,
             **self.stats,
             **drives,
         }

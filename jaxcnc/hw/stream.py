@@ -60,11 +60,12 @@ TYPE_NAMES = {
 }
 KEYED = 1  # flags: an HMAC-SHA256 tag follows the CRC
 RESUME = 2  # flags (HELLO): resume the session named in the frame after a lost link
+POWER = 4  # flags (DATA): the rows' laser power follows them, one float32 (finite, >= 0) per row
 ROWS_PER_FRAME = 256  # a DATA frame stays well below a UDP datagram's limit
 MAX_AXES = 32
 MAX_EVENTS = 1024  # events in one DATA frame
 MAX_TEXT = 512  # bytes of a REFUSED frame's reason
-MAX_FRAME = HEADER.size + ROWS_PER_FRAME * MAX_AXES * 4 + MAX_EVENTS * EVENT_DTYPE.itemsize + CRC.size + TAG_SIZE
+MAX_FRAME = HEADER.size + ROWS_PER_FRAME * (MAX_AXES + 1) * 4 + MAX_EVENTS * EVENT_DTYPE.itemsize + CRC.size + TAG_SIZE
 NONCE = struct.Struct("<Q")  # HELLO's payload: the player's nonce
 STATUS = struct.Struct("<QI")  # WELCOME, ACK, DONE, STOPPED: the nonce echoed (WELCOME) and the underrun count
 STATUS_TYPES = (WELCOME, ACK, DONE, STOPPED)
@@ -102,6 +103,7 @@ class Frame:
     count: int = 0
     aux: int = 0
     rows: np.ndarray | None = None  # DATA: (count, n_axes) int32
+    power: np.ndarray | None = None  # DATA: (count,) float32 laser power per row (sets the POWER flag)
     events: np.ndarray | None = None  # DATA: EVENT_DTYPE records among the rows' ticks
     nonce: int = 0  # HELLO, WELCOME: the player's nonce
     underruns: int = 0  # WELCOME, ACK, DONE, STOPPED: the board's ramp-downs for want of rows
@@ -111,8 +113,9 @@ class Frame:
     def payload(self) -> bytes:
         if self.type == DATA:
             rows = np.ascontiguousarray(self.rows, dtype="<i4").tobytes()
+            power = b"" if self.power is None else np.ascontiguousarray(self.power, dtype="<f4").tobytes()
             ev = b"" if self.events is None else np.ascontiguousarray(self.events, dtype=EVENT_DTYPE).tobytes()
-            return rows + ev
+            return rows + power + ev
         if self.type == HELLO:
             return NONCE.pack(self.nonce)
         if self.type in STATUS_TYPES:
@@ -125,7 +128,9 @@ class Frame:
         payload = self.payload()
         n_events = 0 if self.events is None or self.type != DATA else len(self.events)
         count = len(payload) if self.type == REFUSED else self.count
-        flags = (self.flags & ~KEYED) | (KEYED if key else 0)
+        flags = (self.flags & ~(KEYED | POWER)) | (KEYED if key else 0)
+        if self.type == DATA and self.power is not None:
+            flags |= POWER
         head = HEADER.pack(
             MAGIC,
             VERSION,
@@ -191,22 +196,29 @@ def decode(data: bytes, key: bytes | None = None) -> Frame:
     payload = body[HEADER.size : -CRC.size]
     if typ not in TYPE_NAMES:
         raise ProtocolError(f"unknown frame type {typ}")
-    rows = events = None
+    rows = events = power = None
     nonce, underruns, text = 0, 0, ""
     if typ == DATA:
         if not 1 <= n_axes <= MAX_AXES or not 1 <= count <= ROWS_PER_FRAME or n_events > MAX_EVENTS:
             raise ProtocolError("DATA frame out of range (axes, rows or events)")
         if tick < 0:
             raise ProtocolError("DATA frame for a negative tick")
-        need = count * n_axes * 4 + n_events * EVENT_DTYPE.itemsize
+        n_power = count if flags & POWER else 0
+        need = (count * n_axes + n_power) * 4 + n_events * EVENT_DTYPE.itemsize
         if len(payload) != need:
             raise ProtocolError("DATA length does not match its row and event counts")
         rows = np.frombuffer(payload, dtype="<i4", count=count * n_axes).reshape(count, n_axes)
-        events = np.frombuffer(payload, dtype=EVENT_DTYPE, count=n_events, offset=count * n_axes * 4)
+        if n_power:
+            power = np.frombuffer(payload, dtype="<f4", count=count, offset=count * n_axes * 4)
+            if not np.all(np.isfinite(power) & (power >= 0)):
+                raise ProtocolError("DATA frame with a laser power that is not finite and >= 0")
+        events = np.frombuffer(payload, dtype=EVENT_DTYPE, count=n_events, offset=(count * n_axes + n_power) * 4)
         if n_events and (np.any(events["tick"] < tick) or np.any(events["tick"] >= tick + count)):
             raise ProtocolError("DATA frame with an event outside its ticks")
     elif n_events:
         raise ProtocolError(f"{TYPE_NAMES[typ]} frame with events")
+    elif flags & POWER:
+        raise ProtocolError(f"{TYPE_NAMES[typ]} frame with the POWER flag")
     elif typ == HELLO:
         if len(payload) != NONCE.size:
             raise ProtocolError("HELLO frame of the wrong length")
@@ -221,7 +233,22 @@ def decode(data: bytes, key: bytes | None = None) -> Frame:
         text = payload.decode("utf-8", "replace").splitlines()[0] if payload else ""
     elif payload:
         raise ProtocolError(f"{TYPE_NAMES[typ]} frame with a payload")
-    return Frame(typ, n_axes, session, seq, tick, count, aux, rows, events, nonce, underruns, text, flags & ~KEYED)
+    return Frame(
+        typ,
+        n_axes,
+        session,
+        seq,
+        tick,
+        count,
+        aux,
+        rows,
+        power,
+        events,
+        nonce,
+        underruns,
+        text,
+        flags & ~(KEYED | POWER),
+    )
 
 
 class ReplayWindow:

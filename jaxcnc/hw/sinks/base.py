@@ -22,8 +22,10 @@ class Sink(Protocol):
     def free_rows(self) -> int:
         """Rows the sink's buffer can take now."""
 
-    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray) -> None:
-        """Queue ``rows`` ``(m, n_axes)`` int32 for ticks ``first_tick ..`` and the events among them."""
+    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None) -> None:
+        """Queue ``rows`` ``(m, n_axes)`` int32 for ticks ``first_tick ..``, the events among them and (when the
+        sink's ``write`` names a ``power`` parameter) each row's laser power ``(m,)`` float32 (docs/laser.md).
+        A sink without that parameter gets the events only (the laser held from its ``laser`` events)."""
 
     def wait(self) -> None:
         """Let the sink's clock run until it has room again (or it is done)."""

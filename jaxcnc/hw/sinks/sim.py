@@ -19,11 +19,13 @@ import numpy as np
 
 from jaxcnc.format import EVENT_DTYPE, EventKind, TableHeader
 from jaxcnc.hw.drives import DriveClock
+from jaxcnc.hw.laser import LaserOutput
 from jaxcnc.hw.sinks.record import RowRecorder
 
 
 class SimSink:
-    """Virtual drives. After ``close``, ``recorded`` holds every executed row in order."""
+    """Virtual drives. After ``close``, ``recorded`` holds every executed row in order and ``laser.played`` the
+    laser output of each (the table's power channel; dark where the drives ramped: an underrun, an abort)."""
 
     def __init__(
         self,
@@ -55,7 +57,9 @@ class SimSink:
     def open(self, header: TableHeader) -> None:
         self.header = header
         small = header.n_rows * header.n_axes * 4 <= 256 << 20  # long tables: only the CRC (bounded memory)
-        self._rec = RowRecorder(header.n_axes, self.record_path, keep=self.keep or (self.keep is None and small))
+        keep = self.keep or (self.keep is None and small)
+        self._rec = RowRecorder(header.n_axes, self.record_path, keep=keep)
+        self.laser = LaserOutput(keep=keep)
         a_max = None if self.a_max_mm is None else self.a_max_mm / header.discrete_mm
         self.clock = DriveClock(header.n_axes, header.tick_hz, a_max, self.buffer_rows // 4, self.buffer_rows // 2)
         self._t0 = time.perf_counter()
@@ -63,12 +67,13 @@ class SimSink:
     def free_rows(self) -> int:
         return self.buffer_rows - self.clock.queued
 
-    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray) -> None:
+    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None) -> None:
         if first_tick != self._expected:
             raise RuntimeError(f"sim sink: expected tick {self._expected}, got {first_tick}")
         if rows.shape[0] > self.free_rows():
             raise RuntimeError("sim sink: buffer overflow (the player ignored flow control)")
         self.clock.push(rows)
+        self.laser.push(np.zeros(rows.shape[0], np.float32) if power is None else power)
         self._expected += rows.shape[0]
         if events.size:
             self.events.append(np.asarray(events, EVENT_DTYPE))
@@ -78,6 +83,7 @@ class SimSink:
         taken, pos = self.clock.run(n, ended, positions=self.trace is not None)
         self._servo += n
         self._rec.append(taken)
+        self.laser.take(self.clock.last_lit)
         if self.trace is not None:
             self.trace.append(pos)
 
@@ -114,6 +120,9 @@ class SimSink:
         self.clock.stop()
         taken, pos = self.clock.run_to_rest(positions=self.trace is not None)
         self._rec.append(taken)
+        self.laser.take(np.zeros(taken.shape[0], bool))  # the ramp-down is dark
+        self.laser.drop()
+        self.laser.finish()
         if self.trace is not None:
             self.trace.append(pos)
         self.recorded = self._rec.close()
@@ -123,4 +132,5 @@ class SimSink:
             left = self.clock.queued
             self._sleep_until(self._servo + left)
             self._execute(left, ended=True)
+        self.laser.finish()
         self.recorded = self._rec.close()

@@ -401,22 +401,27 @@ class StreamSink:
         in_flight = sum(f.count for t, f in self.retained.items() if t + f.count > self.acked)
         return max(0, self.credit - in_flight)
 
-    def _frames(self, first_tick: int, rows: np.ndarray, events: np.ndarray):
+    def _frames(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None):
         step = ROWS_PER_FRAME
         for i in range(0, rows.shape[0], step):
             part = rows[i : i + step]
+            lit = None if power is None else power[i : i + step]
             lo, hi = np.searchsorted(events["tick"], [first_tick + i, first_tick + i + part.shape[0]])
             if hi - lo > MAX_EVENTS_PER_FRAME and part.shape[0] > 1:
-                yield from self._frames(first_tick + i, part[: part.shape[0] // 2], events)
-                yield from self._frames(first_tick + i + part.shape[0] // 2, part[part.shape[0] // 2 :], events)
+                half = part.shape[0] // 2
+                yield from self._frames(first_tick + i, part[:half], events, None if lit is None else lit[:half])
+                yield from self._frames(first_tick + i + half, part[half:], events, None if lit is None else lit[half:])
                 continue
             if hi - lo > MAX_EVENTS_PER_FRAME:
                 raise ValueError(f"more than {MAX_EVENTS_PER_FRAME} events on tick {first_tick + i}")
             ev = np.ascontiguousarray(events[lo:hi]) if hi > lo else None
-            yield Frame(DATA, self.header.n_axes, tick=first_tick + i, count=part.shape[0], rows=part, events=ev)
+            yield Frame(
+                DATA, self.header.n_axes, tick=first_tick + i, count=part.shape[0], rows=part, power=lit, events=ev
+            )
 
-    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray) -> None:
-        for frame in self._frames(first_tick, rows, events):
+    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None) -> None:
+        """Frame the rows (256 a frame) with their power (the POWER flag) and events; send, keep until acked."""
+        for frame in self._frames(first_tick, rows, events, power):
             self.retained[frame.tick] = frame
             self._guard(self._send, frame)
         self.rows_sent = max(self.rows_sent, first_tick + rows.shape[0])
