@@ -619,7 +619,19 @@ def recorded_options(table: TableFile, dialect: str | None = None) -> dict[str, 
     """The options the table's source was read with (header ``source_options``), ``dialect`` (given on the
     command line) in place of the recorded one. A header whose record is not a table of options is refused."""
     recorded = table.header.meta.get("source_options", {})
-    if not isinstance(recorded, dict) or not all(isinstance(k, str) for k in recorded):
+
+    def plain(v: Any) -> bool:  # what an option recorded by jaxcnc can be: a word, a flag, a number, names
+        if isinstance(v, (str, bool)):
+            return True
+        if isinstance(v, (int, float)):
+            return math.isfinite(v)
+        return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+    if (
+        not isinstance(recorded, dict)
+        or not all(isinstance(k, str) and plain(v) for k, v in recorded.items())
+        or not isinstance(recorded.get("dialect", ""), str)
+    ):
         raise JaxcncError(f"{table.path}: header source_options = {recorded!r}: must be a table of named options")
     return source_options(dialect, recorded)
 

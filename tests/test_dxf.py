@@ -340,6 +340,21 @@ def test_cli_drawing_options_reach_the_plan_and_the_check(tmp_path, capsys):
     assert plan("slow.ticks", "--allow-open", "--lead-in", "2", "--feed", "25") == 0
     assert TableFile(tmp_path / "slow.ticks").header.meta["total_time_s"] > 1.5 * fast  # the feed is used
 
+    # a table whose header records options no front end could have been given (written by hand, as a forger
+    # would): refused in one line, not a traceback
+    drawing_job = plan_job(read_dxf(part, START, DrawingOptions(allow_open=True)).program, parse_machine(
+        machine.read_text(), str(machine)))  # fmt: skip
+    for forged, why in (
+        ({"dialect": 5}, "must be a table of named options"),
+        ({"layers": [1]}, "must be a table of named options"),
+        ({"tol_mm": "x", "allow_open": True}, "option tol_mm = 'x': must be a finite number"),
+    ):
+        bad_table = write_table(drawing_job, tmp_path / "forged.ticks", progress=False, source_options=forged)
+        capsys.readouterr()
+        assert main(["check", str(bad_table), "-m", str(machine)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert why in err and "\n" not in err, err
+
     capsys.readouterr()
     assert plan("bad.ticks", "--join-tol", "-1") == 2
     err = capsys.readouterr().err.strip()
