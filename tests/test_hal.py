@@ -107,3 +107,21 @@ def test_two_sinks_opened_at_the_same_instant_one_is_refused(tmp_path):
         for s, o in zip(sinks, outcome, strict=True):
             if o == "opened":
                 s.close()
+
+
+def test_laser_power_enable_and_pulse_bits_through_linuxcnc(tmp_path):
+    """Issue 16: M4 power per tick, the enable bit and PSO pulses one tick wide, as the table has them."""
+    from jaxcnc.machine import parse_machine
+    from tests.conftest import machine_text
+
+    m = parse_machine(machine_text() + '[laser]\nmode = "pso"\npso_mm = 0.5\n', "pso.toml")
+    _, table, meas = table_of("M4 S80\nG1 X10 F1200\nG1 Y10\nM5\nG0 X0 Y0\nM2\n", m, tmp_path)
+    assert meas.ok
+    sink = HalStreamerSink(depth=4096, keep=True)
+    play(table, sink)
+    np.testing.assert_array_equal(sink.recorded, table.positions)
+    np.testing.assert_allclose(sink.laser_power, table.power, rtol=1e-6, atol=1e-6)  # the sampler prints decimals
+    np.testing.assert_array_equal(sink.laser_on, table.power > 0)
+    pso = table.events[table.events["kind"] == EventKind.PSO_PULSE]["tick"]
+    assert pso.size > 30
+    np.testing.assert_array_equal(np.flatnonzero(sink.laser_pulse), pso)  # one tick each, on its tick

@@ -4,7 +4,8 @@ The sink starts its own HAL session and wires, in one servo thread running at th
 rate (or ``period_ns``)::
 
     halstreamer (this process feeds its stdin)
-        → streamer.0   pins: one s32 per axis (discretes), one float for the laser power
+        → streamer.0   pins: one s32 per axis (discretes), a float for the laser power, a bit for the
+                       laser enable (power > 0) and a bit for pulses (work/PSO pulses, one tick wide)
         → sampler.0    the same pins plus streamer.0.underruns, recorded only on ticks where
                        the streamer delivered fresh data (enable = run AND NOT streamer.0.empty)
         → halsampler   (its stdout comes back to this process line by line)
@@ -26,8 +27,12 @@ lock (``flock`` on ``LOCK_PATH``) before it looks for a running session and hold
 session has ended, so two players can never both start one; it refuses to start if one is running
 already (``halrun -U`` ends one that was not started by jaxcnc).
 
-On an abort (the player's error or a signal) the laser's power passes a gate (``mult2``) that is
-closed at once, and the streamer is disabled: the drives hold the last executed row.
+The laser (``docs/laser.md``): power, enable and pulse pass a gate that is open only while the streamer
+delivers fresh rows and ``laser-enable`` is set — the laser is dark on the very tick an underrun begins
+(the streamer holds its pins then; the gate does not hold the beam), and on an abort (the player's error or
+a signal) ``laser-enable`` is cleared at once and the streamer is disabled: the drives hold the last executed
+row. The gated outputs are the nets ``laser-power`` (float), ``laser-on`` and ``laser-pulse`` (bits) for the
+machine's HAL to drive the source with; the sampler records them beside the positions.
 """
 
 from __future__ import annotations
@@ -77,32 +82,41 @@ def _rtapi_uid() -> int:
 
 def hal_config(n_axes: int, depth: int, period_ns: int) -> str:
     """The HAL file: streamer → sampler (gated on fresh data), the laser through a gate, one servo thread."""
-    cfg = "s" * n_axes + "f"
+    n = n_axes
+    cfg = "s" * n + "fbb"
     lines = [
         f"loadrt threads name1=servo period1={period_ns}",
         f"loadrt streamer depth={depth} cfg={cfg}",
         f"loadrt sampler depth={4 * depth} cfg={cfg}s",
         "loadrt not count=1",
-        "loadrt and2 count=1",
-        "loadrt mult2 count=1",
+        "loadrt and2 count=4",
+        "loadrt mux2 count=1",
         "addf streamer.0 servo",
-        "addf mult2.0 servo",
         "addf not.0 servo",
         "addf and2.0 servo",
+        "addf and2.1 servo",
+        "addf and2.2 servo",
+        "addf and2.3 servo",
+        "addf mux2.0 servo",
         "addf sampler.0 servo",
         "net run streamer.0.enable and2.0.in0",
         "net empty streamer.0.empty not.0.in",
-        "net fresh not.0.out and2.0.in1",
+        "net fresh not.0.out and2.0.in1 and2.1.in0",
         "net record and2.0.out sampler.0.enable",
         "sets run 0",
-        # the laser power passes a gate the sink closes on an abort (laser off at once)
-        f"net laser-cmd streamer.0.pin.{n_axes} mult2.0.in0",
-        "net laser-enable mult2.0.in1",
+        # the laser gate: open while rows are fresh and laser-enable is set (the sink clears it on an abort)
+        "net laser-enable and2.1.in1",
         "sets laser-enable 1",
-        f"net col{n_axes} mult2.0.out sampler.0.pin.{n_axes}",
+        "net laser-gate and2.1.out mux2.0.sel and2.2.in1 and2.3.in1",
+        f"net laser-cmd streamer.0.pin.{n} mux2.0.in1",
+        f"net laser-power mux2.0.out sampler.0.pin.{n}",
+        f"net laser-on-cmd streamer.0.pin.{n + 1} and2.2.in0",
+        f"net laser-on and2.2.out sampler.0.pin.{n + 1}",
+        f"net laser-pulse-cmd streamer.0.pin.{n + 2} and2.3.in0",
+        f"net laser-pulse and2.3.out sampler.0.pin.{n + 2}",
     ]
-    lines += [f"net col{k} streamer.0.pin.{k} sampler.0.pin.{k}" for k in range(n_axes)]
-    lines += [f"net underruns streamer.0.underruns sampler.0.pin.{n_axes + 1}", "start"]
+    lines += [f"net col{k} streamer.0.pin.{k} sampler.0.pin.{k}" for k in range(n)]
+    lines += [f"net underruns streamer.0.underruns sampler.0.pin.{n + 3}", "start"]
     return "\n".join(lines) + "\n"
 
 
@@ -129,6 +143,8 @@ class HalStreamerSink:
         self.record_path = Path(record) if record else None
         self.recorded: np.ndarray | None = None
         self.laser_power: np.ndarray | None = None  # after close: the laser column as sampled (if kept)
+        self.laser_on: np.ndarray | None = None  # after close: the enable bit as sampled (if kept)
+        self.laser_pulse: np.ndarray | None = None  # after close: the pulse bit as sampled (if kept)
         self.underruns = 0  # ticks the streamer found its FIFO empty between the first and the last row
         self._sent = 0
         self._executed = 0
@@ -204,7 +220,7 @@ class HalStreamerSink:
     def open(self, header: TableHeader) -> None:
         self.header = header
         n = header.n_axes
-        self._ncols = n + 2
+        self._ncols = n + 4
         self._lock()
         self._hal_env = self._env()
         if self._run(REALTIME, "status")[0] == 0:
@@ -267,9 +283,9 @@ class HalStreamerSink:
                     self._error = f"HAL executed {k + m} ticks, more than the {self._sent} sent"
                     self._cond.notify_all()
                 return
-            self._rec.append(vals[:, :-2].astype(np.int32))
+            self._rec.append(vals[:, :-4].astype(np.int32))
             if self._laser_rows is not None:
-                self._laser_rows.append(vals[:, -2])
+                self._laser_rows.append(vals[:, -4:-1])
             u = vals[:, -1]
             if self._first_underruns is None:
                 self._first_underruns = int(u[0])
@@ -298,15 +314,23 @@ class HalStreamerSink:
         self._laser = float(laser["value"][-1])
         return power
 
-    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray) -> None:
+    def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None) -> None:
+        """Queue rows with the laser: ``power`` per row (else held from the LASER events), the enable bit
+        (power > 0) and the pulse bit (1 on the tick of each work or PSO pulse event)."""
         if first_tick != self._sent:
             raise RuntimeError(f"halstreamer sink: expected tick {self._sent}, got {first_tick}")
         m = rows.shape[0]
         if m > self.free_rows():
             raise RuntimeError("halstreamer sink: FIFO overflow (the player ignored flow control)")
-        power = self._laser_column(first_tick, m, events)
-        fmt = " ".join(["%d"] * rows.shape[1] + ["%.17g"]) + "\n"
-        flat = np.column_stack([rows.astype(np.int64), power]).astype(object).ravel()
+        if power is None:
+            power = self._laser_column(first_tick, m, events)
+        power = np.asarray(power, np.float64)
+        pulse = np.zeros(m, np.int64)
+        pulses = events[np.isin(events["kind"], (EventKind.WORK_PULSE, EventKind.PSO_PULSE))]
+        pulse[pulses["tick"] - first_tick] = 1
+        fmt = " ".join(["%d"] * rows.shape[1] + ["%.9g", "%d", "%d"]) + "\n"
+        cols = [rows.astype(np.int64), power, (power > 0).astype(np.int64), pulse]
+        flat = np.column_stack(cols).astype(object).ravel()
         try:
             self._streamer.stdin.write(((fmt * m) % tuple(flat)).encode())
             self._streamer.stdin.flush()
@@ -366,8 +390,7 @@ class HalStreamerSink:
                 self._streamer.stdin.close()
                 self._wait_for(self._sent)
                 self.recorded = self._rec.close()
-                if self._laser_rows is not None:
-                    self.laser_power = np.concatenate(self._laser_rows) if self._laser_rows else np.zeros(0)
+                self._laser_columns()
         finally:
             self._shutdown()
 
@@ -379,7 +402,7 @@ class HalStreamerSink:
             if self._hal_up and self._procs:
                 self._run("halcmd", "sets", "laser-enable", "0")
                 self._run("halcmd", "sets", "run", "0")
-                rc, text = self._run("halcmd", "getp", "mult2.0.out")
+                rc, text = self._run("halcmd", "getp", "mux2.0.out")
                 try:
                     self.laser_at_end = float(text.split()[-1]) if rc == 0 else None
                 except (ValueError, IndexError):
@@ -388,12 +411,17 @@ class HalStreamerSink:
                 self._stop_procs()
                 self._reader.join(2.0)
                 self.recorded = self._rec.close()
-                if self._laser_rows is not None:
-                    self.laser_power = np.concatenate(self._laser_rows) if self._laser_rows else np.zeros(0)
+                self._laser_columns()
         except Exception:  # noqa: BLE001 - best effort: the session is ended below in any case
             pass
         finally:
             self._shutdown()
+
+    def _laser_columns(self) -> None:
+        """Split the sampled laser columns into power, enable and pulse (when kept)."""
+        if self._laser_rows is not None:
+            cols = np.concatenate(self._laser_rows) if self._laser_rows else np.zeros((0, 3))
+            self.laser_power, self.laser_on, self.laser_pulse = cols[:, 0], cols[:, 1] > 0, cols[:, 2] > 0
 
     def _settle(self, quiet_s: float = 0.2, limit_s: float = 2.0) -> None:
         """Wait until the samples already taken have come back (no new one for ``quiet_s``)."""
