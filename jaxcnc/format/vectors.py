@@ -194,15 +194,22 @@ def check_records(rec: np.ndarray, where: str = "<list>") -> None:
 # ---------------------------------------------------------------------------------------------- file
 
 
-def write_vectors(path: str | Path, rec: np.ndarray, header: VectorHeader) -> None:
-    """Write a list file: magic, version (u4), JSON length (u4), JSON header, records, CRC-32 of all before."""
-    check_records(rec, str(path))
+def vector_bytes(rec: np.ndarray, header: VectorHeader, where: str = "<list>") -> bytes:
+    """A list as the bytes of a list file (what a host sends a board): magic, version (u4), JSON length (u4),
+    JSON header, records, CRC-32 of all before. The records are checked first (:func:`check_records`)."""
+    check_records(rec, where)
     meta = dict(header.meta)
     meta.update(tick_hz=header.tick_hz, discrete_mm=header.discrete_mm, axes=list(header.axes), n_records=len(rec))
     js = json.dumps(meta, sort_keys=True, allow_nan=False).encode("utf-8")
     body = MAGIC + struct.pack("<II", VERSION, len(js)) + js + np.ascontiguousarray(rec, VECTOR_DTYPE).tobytes()
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def write_vectors(path: str | Path, rec: np.ndarray, header: VectorHeader) -> None:
+    """Write a list file (:func:`vector_bytes`), atomically."""
+    data = vector_bytes(rec, header, str(path))
     tmp = Path(str(path) + ".part")
-    tmp.write_bytes(body + struct.pack("<I", zlib.crc32(body)))
+    tmp.write_bytes(data)
     tmp.replace(path)
 
 
