@@ -303,6 +303,12 @@ def cmd_check(args: argparse.Namespace) -> int:
             )
         if meas.path is not None or meas.pulses is None:
             print(_path_line(meas))
+        if meas.laser is not None:
+            lc = meas.laser
+            print(
+                f"  laser: {lc.n_lit} ticks lit ({lc.n_m4} under M4), the power channel within "
+                f"{lc.max_power_error:.2g} of S of its mode, feed and speed at every tick"
+            )
         if dynamics:
             print(*dynamics, sep="\n")
         return 0
