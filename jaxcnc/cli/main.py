@@ -543,6 +543,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.vibration import run_vibration_benchmarks
 
         results["vibration"] = run_vibration_benchmarks(repeats=args.repeats)
+    if args.suite in ("all", "scanner"):
+        from jaxcnc.bench.scanner import run_scanner_benchmarks
+
+        results["scanner"] = run_scanner_benchmarks(repeats=args.repeats)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
@@ -801,7 +805,8 @@ def build_parser() -> argparse.ArgumentParser:
         "NURBS evaluation against scipy and geomdl, tick generation on curves. player: table playback into sim "
         "and the TCP receiver. planners: topp beside CasADi and toppra on the butterfly. pulsed: the documents' "
         "14 engraving programs. vibration: no shaping, each input shaper and speed-band avoidance on cornered "
-        "parts with a 40 Hz mode (job time, residual vibration, contour error, planning time). Every run prints "
+        "parts with a 40 Hz mode (job time, residual vibration, contour error, planning time). scanner: galvo vector "
+        "list compilation (vectors/s) and emulation at the 10 us tick (ticks/s) against real time. Every run prints "
         "the date, the commit and the load average; JIT compile time "
         "is reported apart. A missing input is an error (exit 2), never replaced by another.",
     )
@@ -834,7 +839,19 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         nargs="?",
         default="all",
-        choices=("all", "plan", "corners", "geometry", "player", "planners", "pulsed", "pbf", "split", "vibration"),
+        choices=(
+            "all",
+            "plan",
+            "corners",
+            "geometry",
+            "player",
+            "planners",
+            "pulsed",
+            "pbf",
+            "split",
+            "vibration",
+            "scanner",
+        ),
         help="which benchmarks (default: %(default)s)",
     )
     sp.add_argument("--stl", help="pbf: the part (default: the corpus's frameGuide.stl)")
