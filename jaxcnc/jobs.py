@@ -295,10 +295,13 @@ def plan_file(
     bounds: JobBounds = DEFAULT_BOUNDS,
     allow_repeats: bool = False,
     input_options: Mapping[str, Any] | None = None,
+    shaping: Mapping[str, Any] | None = None,
 ) -> dict:
     """Plan ``input_path`` on the machine, write and verify the table at ``out``; the report dict.
 
     ``input_options``: the front end's options (:func:`load_program`), recorded in the table's header.
+    ``shaping``: input shaping and/or speed-band avoidance of a contour job (:func:`plan_dynamic_file`: ``shaper``
+    and the options of :func:`jaxcnc.dynamics.shaped.plan_dynamic`).
 
     On a machine with a ``[scanner]`` a contour job is split between stage and scanner (``split``: ``own``
     by default, ``seed``, or ``none`` for the stage alone; :func:`plan_split_file`). ``bounds``: how large the
@@ -307,6 +310,8 @@ def plan_file(
     """
     machine = _machine(machine)
     if is_point_job(input_path, machine):
+        if shaping is not None:
+            raise JaxcncError("shaping and speed bands apply to contour jobs, not point-by-point pulsed ones")
         if split not in (None, "none"):
             raise JaxcncError("--split applies to contour jobs, not point-by-point pulsed ones")
         return plan_points_file(
@@ -323,6 +328,25 @@ def plan_file(
         )
     if allow_repeats:
         raise JaxcncError("--allow-repeats applies to point-by-point jobs (point files or pulsed machines)")
+    if shaping is not None:
+        if (machine.scanner is not None and split != "none") or kinematics or split_plot:
+            raise JaxcncError(
+                "shaping and speed bands plan the stage alone: not a stage + scanner split (pass --split none on a "
+                "machine with a [scanner]; no --kinematics or --split-plot)"
+            )
+        rest = dict(shaping)
+        return plan_dynamic_file(
+            input_path,
+            machine,
+            out,
+            rest.pop("shaper", None),
+            progress=progress,
+            dialect=dialect,
+            input_options=input_options,
+            bounds=bounds,
+            planner=planner,
+            **rest,
+        )
     if reorder:
         raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
     if split not in (None, "none"):
@@ -484,7 +508,105 @@ def plan_program_file(
         "path_tolerance_mm": path.max_tol_mm,
         "limits": limits(machine),
         "violations": [str(v) for v in meas.violations + path.violations],
+        **_dynamics_entry(table, machine),
     }
+
+
+def _dynamics_entry(table: TableFile, machine: MachineConfig) -> dict:
+    """``{"dynamics": ...}``: the simulated axes' figures when the machine has modes (issue 20), else nothing."""
+    if not any(a.modes for a in machine.axes):
+        return {}
+    from jaxcnc.dynamics.simulate import simulate_table
+
+    return {"dynamics": simulate_table(table, machine).summary()}
+
+
+def plan_dynamic_file(
+    input_path: str | Path,
+    machine: MachineConfig | str | Path,
+    out: str | Path,
+    shaper: str | None = None,
+    *,
+    progress: bool | None = None,
+    dialect: str | None = None,
+    simulate: bool = True,
+    input_options: Mapping[str, Any] | None = None,
+    bounds: JobBounds = DEFAULT_BOUNDS,
+    **options: Any,
+) -> dict:
+    """Plan a contour file with input shaping and/or speed-band avoidance (issue 20; ``shaper`` and ``options``
+    as :func:`jaxcnc.dynamics.shaped.plan_dynamic` takes them), write the table, check it (limits at every tick,
+    the path against the *given* program within the contour error shaping is allowed) and, when the machine has
+    modes, simulate it (:func:`jaxcnc.dynamics.simulate.simulate_table`); the report. The source is read with
+    ``input_options`` and ``bounds`` hold as for :func:`plan_file`."""
+    from jaxcnc.dynamics.shaped import plan_dynamic, write_dynamic_table
+    from jaxcnc.format import TableFile
+    from jaxcnc.jaxconfig import configure_jax
+    from jaxcnc.ticks.deviation import path_deviation
+    from jaxcnc.ticks.verify import measure_table
+
+    configure_jax()
+    machine = _machine(machine)
+    input_path = Path(input_path)
+    if front_end_for(input_path).produces != "program":
+        name = front_end_for(input_path).name
+        raise JaxcncError(f"{input_path}: shaping and speed bands apply to contour programs, not {name} points")
+    opts = source_options(dialect, input_options)
+    st = Stages(progress, f"planning {input_path.name} (shaped)")
+    try:
+        with st.stage("parse"):
+            program = load_program(input_path, machine, input_options=opts)
+            check_program_bounds(program, machine, bounds)
+        with st.stage("plan"):
+            dp = plan_dynamic(program, machine, shaper, **options)
+            n_rows = dp.sampler.n_rows
+            check_planned_bounds(str(input_path), n_rows, (n_rows - 1) / machine.tick_hz, machine, bounds)
+        with st.stage("ticks"):
+            write_dynamic_table(dp, program, out, progress, source_options=opts)
+        with st.stage("verify"):
+            table = TableFile(out)
+            meas = measure_table(table, machine)
+            path = path_deviation(table, machine, program)
+    finally:
+        st.close()
+    wall = st.seconds["parse"] + st.seconds["plan"] + st.seconds["ticks"]
+    report = {
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": table.header.meta.get("planner"),
+        "total_time_s": (table.header.n_rows - 1) / machine.tick_hz,
+        "unshaped_time_s": dp.job.plan.total_time_s,
+        "n_blocks": program.n_blocks,
+        "n_ticks": table.header.n_rows,
+        "tick_hz": machine.tick_hz,
+        "path_length_mm": dp.job.path_length_mm,
+        "plan_wall_s": wall,
+        "max_abs_v": meas.max_abs_v,
+        "max_abs_a": meas.max_abs_a,
+        "max_abs_j": meas.max_abs_j,
+        "max_path_deviation_mm": path.max_mm,
+        "path_tolerance_mm": path.max_tol_mm,
+        "violations": [str(v) for v in meas.violations + path.violations],
+    }
+    if dp.shapers:
+        sh = next(iter(dp.shapers.values()))
+        report["shaping"] = {
+            "shapers": {a: [s.name, s.f_hz, s.zeta] for a, s in dp.shapers.items()},
+            "duration_s": max(s.duration_s for s in dp.shapers.values()),
+            "hold_ticks": int(dp.sampler.hold),
+            "rest_points": int(dp.sampler.rest.size),
+            "extra_s": dp.sampler.extra_s,
+            "stops_added": dp.n_stops_added,
+            "arc_feed_caps": dp.n_feed_caps,
+            "contour_tol_mm": dp.tol_mm,
+            "vibration_at_design": float(sh.vibration(sh.f_hz, sh.zeta)),
+        }
+    if dp.bands is not None:
+        report["speed_bands"] = {"bands_mm_s": dp.bands.bands.tolist(), "rows_slowed": dp.bands.n_rows_slowed}
+    if simulate:
+        report.update(_dynamics_entry(table, machine))
+    return report
 
 
 def plan_points_file(

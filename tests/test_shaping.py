@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxcnc.dynamics import Mode, simulate_table
-from jaxcnc.dynamics.shaped import plan_dynamic_file
 from jaxcnc.errors import JaxcncError
 from jaxcnc.format import TableFile
+from jaxcnc.jobs import plan_dynamic_file
 from jaxcnc.machine import load_machine
 from jaxcnc.planners.shaping import SHAPER_NAMES, fir_taps, make_shaper, merge_bands, parse_bands, resonant_bands
 from tests.test_dynamics import VIB_MACHINE, cornered_gcode
@@ -200,3 +200,42 @@ def test_parse_bands_fuzz(text):
         assert "\n" not in str(exc)
         return
     assert isinstance(out, str) or (out.ndim == 2 and np.all(out[:, 0] < out[:, 1]))
+
+
+def test_cli_shaped_exact_arcs_check_and_the_plan_flags_are_honoured(tmp_path, capsys):
+    """`plan --shaper` goes through the one Job API (`plan_file(shaping=...)`): an arc at exact corners is held to
+    the 1 µm sagitta the table records (`shaping_tol_mm`) and `check` passes it; the size bounds hold; drawing
+    options reach the drawing; flags that cannot apply are refused, never ignored."""
+    import ezdxf
+
+    from jaxcnc.cli.main import main
+
+    machine = tmp_path / "vib.toml"
+    machine.write_text(VIB_MACHINE + "corner_tol_mm = 0\n")
+    prog = tmp_path / "arc.ngc"
+    prog.write_text("G21 G90\nG1 X10 Y0 F6000\nG3 X20 Y10 I0 J10\nG1 X20 Y20\nM2\n")
+    out = tmp_path / "arc.ticks"
+    assert main(["plan", str(prog), "-m", str(machine), "-o", str(out), "-q", "--shaper", "zvd"]) == 0
+    table = TableFile(out)
+    assert table.header.meta["shaping_tol_mm"] == pytest.approx(1e-3)
+    capsys.readouterr()
+    assert main(["check", str(out), "-m", str(machine)]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if "path: max deviation" in ln)
+    assert "allowed 0.001001 mm" in line
+    assert main(["plan", str(prog), "-m", str(machine), "-o", str(tmp_path / "b.ticks"), "--shaper", "zvd",
+                 "--max-ticks", "1000"]) == 2  # fmt: skip
+    assert "1,000" in capsys.readouterr().err and not (tmp_path / "b.ticks").exists()
+    assert main(["plan", str(prog), "-m", str(machine), "-o", str(tmp_path / "c.ticks"), "--shaper-hz", "40"]) == 2
+    assert "--shaper-hz goes with --shaper" in capsys.readouterr().err
+    assert main(["plan", str(prog), "-m", str(machine), "-o", str(tmp_path / "d.ticks"), "--shaper", "zvd",
+                 "--kinematics", str(tmp_path / "k.csv")]) == 2  # fmt: skip
+    assert "not a stage + scanner split" in capsys.readouterr().err
+    doc = ezdxf.new(units=4)
+    doc.modelspace().add_lwpolyline([(0, 0), (30, 0), (30, 20), (0, 20)], close=True)
+    doc.saveas(tmp_path / "plate.dxf")
+    rep = tmp_path / "plate.json"
+    assert main(["plan", str(tmp_path / "plate.dxf"), "-m", str(machine), "-o", str(tmp_path / "plate.ticks"), "-q",
+                 "--shaper", "ei", "--lead-in", "3", "-r", str(rep)]) == 0  # fmt: skip
+    meta = TableFile(tmp_path / "plate.ticks").header.meta
+    assert meta["source_options"] == {"lead_in_mm": 3.0}
+    assert main(["check", str(tmp_path / "plate.ticks"), "-m", str(machine)]) == 0  # the lead-in is in the program

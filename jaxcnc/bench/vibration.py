@@ -76,8 +76,8 @@ METHODS = ("none", "zv", "mzv", "zvd", "ei", "2hump_ei", "3hump_ei", "bands")
 def run_case(folder: Path, machine, part: str, method: str, repeats: int = 1) -> dict:
     """Plan ``part`` with ``method`` (a shaper, ``none`` or ``bands``: auto speed bands), check, simulate."""
     from jaxcnc.dynamics import Mode, simulate_table
-    from jaxcnc.dynamics.shaped import plan_dynamic_file
     from jaxcnc.format import TableFile
+    from jaxcnc.jobs import plan_dynamic_file
 
     src = folder / f"{part}.ngc"
     src.write_text(PARTS[part])
@@ -116,8 +116,8 @@ def run_case(folder: Path, machine, part: str, method: str, repeats: int = 1) ->
 def band_sweep(folder: Path, machine, feeds=(40, 60, 70, 80, 90, 100, 120)) -> list[dict]:
     """The serration at each feed, with and without speed-band avoidance: vibration amplitude during the cut."""
     from jaxcnc.dynamics import simulate_table
-    from jaxcnc.dynamics.shaped import plan_dynamic_file
     from jaxcnc.format import TableFile
+    from jaxcnc.jobs import plan_dynamic_file
 
     rows = []
     for v in feeds:

@@ -90,27 +90,33 @@ def _drawing_options(args: argparse.Namespace) -> dict:
     }
 
 
-def _plan_dynamic(args: argparse.Namespace) -> int:
-    """``plan --shaper`` / ``--avoid-bands`` (issue 20): jaxcnc.dynamics.shaped.plan_dynamic_file."""
-    from jaxcnc.dynamics.shaped import plan_dynamic_file
+def _shaping(args: argparse.Namespace) -> dict | None:
+    """``plan --shaper`` / ``--avoid-bands`` (issue 20) as :func:`jaxcnc.jobs.plan_file`'s ``shaping``."""
+    if not (args.shaper or args.avoid_bands):
+        given = {
+            "--shaper-hz": args.shaper_hz,
+            "--shaper-zeta": args.shaper_zeta,
+            "--shaper-tol": args.shaper_tol,
+            "--shaper-per-axis": args.shaper_per_axis,
+        }
+        for flag, value in given.items():
+            if value:
+                raise JaxcncError(f"{flag} goes with --shaper")
+        return None
     from jaxcnc.planners.shaping import parse_bands
 
-    report = plan_dynamic_file(
-        Path(args.input),
-        Path(args.machine),
-        Path(args.output),
-        args.shaper,
-        progress=False if args.quiet else None,
-        dialect=args.dialect,
-        f_hz=args.shaper_hz,
-        zeta=args.shaper_zeta,
-        per_axis=args.shaper_per_axis,
-        tol_mm=args.shaper_tol,
-        bands=parse_bands(args.avoid_bands) if args.avoid_bands else None,
-        planner=args.planner,
-    )
-    if args.report:
-        Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
+    return {
+        "shaper": args.shaper,
+        "f_hz": args.shaper_hz,
+        "zeta": args.shaper_zeta,
+        "per_axis": args.shaper_per_axis,
+        "tol_mm": args.shaper_tol,
+        "bands": parse_bands(args.avoid_bands) if args.avoid_bands else None,
+    }
+
+
+def _print_dynamic(args: argparse.Namespace, report: dict) -> int:
+    """The summary of a shaped / band-avoiding plan."""
     if not args.quiet:
         print(
             f"planned {report['input']}: {report['n_blocks']} blocks, {report['path_length_mm']:.1f} mm, "
@@ -148,9 +154,6 @@ def _plan_dynamic(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from jaxcnc.jobs import JobBounds, plan_file
 
-    if args.shaper or args.avoid_bands:
-        return _plan_dynamic(args)
-
     report = plan_file(
         Path(args.input),
         Path(args.machine),
@@ -165,14 +168,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
         bounds=JobBounds(max_ticks=args.max_ticks, max_bytes=args.max_bytes, max_duration_s=args.max_duration),
         allow_repeats=args.allow_repeats,
         input_options=_drawing_options(args),
+        shaping=_shaping(args),
     )
-    if "n_points" not in report and "split" not in report:  # a contour table on a machine with axis modes
-        from jaxcnc.dynamics.simulate import table_dynamics
-
-        if (dyn := table_dynamics(args.output, args.machine)) is not None:
-            report["dynamics"] = dyn
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n")
+    if "unshaped_time_s" in report:
+        return _print_dynamic(args, report)
     if not args.quiet and "n_points" in report:
         print(
             f"planned {report['input']}: {report['n_points']} points, {report['n_pulses']} pulses "

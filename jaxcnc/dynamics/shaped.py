@@ -21,7 +21,6 @@ The stage (issue 20; shapers in :mod:`jaxcnc.planners.shaping`):
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -30,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxcnc.errors import JaxcncError
-from jaxcnc.machine import MachineConfig, load_machine
+from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.shaping import (
     BandPlan,
@@ -207,8 +206,16 @@ def plan_dynamic(
     return DynamicPlan(job, sampler, shapers, band_plan, stops, caps, tol, time.perf_counter() - t0)
 
 
-def write_dynamic_table(dp: DynamicPlan, original: Program, out: str | Path, progress: bool | None = None) -> Path:
-    """Write the table of ``dp`` (shaped or not) with its events; the header names ``original``'s file."""
+def write_dynamic_table(
+    dp: DynamicPlan,
+    original: Program,
+    out: str | Path,
+    progress: bool | None = None,
+    source_options: dict | None = None,
+) -> Path:
+    """Write the table of ``dp`` (shaped or not) with its events; the header names ``original``'s file (read
+    with ``source_options``, recorded as :func:`jaxcnc.ticks.table.write_table` does) and, for a shaped table,
+    the contour error shaping was allowed (``shaping_tol_mm``: the path check allows it at every tick)."""
     from jaxcnc.ticks.sample import machine_axes
     from jaxcnc.ticks.table import job_events, table_meta, write_samples
 
@@ -229,88 +236,14 @@ def write_dynamic_table(dp: DynamicPlan, original: Program, out: str | Path, pro
             for a, v in dp.shapers.items()
         }
         extra["shaper_hold_ticks"] = int(dp.sampler.hold)
+        extra["shaping_tol_mm"] = float(dp.tol_mm)
         del s
     if dp.bands is not None:
         extra["speed_bands_mm_s"] = dp.bands.bands.tolist()
+    if source_options:
+        extra["source_options"] = dict(source_options)
     name = job.planner + ("+" + "/".join(sorted({v.name for v in dp.shapers.values()})) if dp.shapers else "")
     meta = table_meta(
         m, original.file, name, (n_rows - 1) / m.tick_hz, start_mm=start, n_blocks=original.n_blocks, **extra
     )
     return write_samples(out, m, dp.sampler, events, meta, progress)
-
-
-def plan_dynamic_file(
-    input_path: str | Path,
-    machine: MachineConfig | str | Path,
-    out: str | Path,
-    shaper: str | None = None,
-    *,
-    progress: bool | None = None,
-    dialect: str | None = None,
-    simulate: bool = True,
-    **options,
-) -> dict:
-    """Plan a contour file with shaping and/or band avoidance (:func:`plan_dynamic` ``options``), write the
-    table, check it (limits at every tick, the path against the *given* program) and, when the machine has
-    modes, simulate it (:func:`~jaxcnc.dynamics.simulate.simulate_table`); the report."""
-    from jaxcnc.format import TableFile
-    from jaxcnc.front_ends import front_end_for
-    from jaxcnc.jaxconfig import configure_jax
-    from jaxcnc.ticks.deviation import path_deviation
-    from jaxcnc.ticks.verify import measure_table
-
-    configure_jax()
-    machine = machine if isinstance(machine, MachineConfig) else load_machine(machine)
-    input_path = Path(input_path)
-    fe = front_end_for(input_path)
-    if fe.produces != "program":
-        raise JaxcncError(f"{input_path}: shaping and speed bands apply to contour programs, not {fe.name} points")
-    t0 = time.perf_counter()
-    program = fe.load(input_path, machine, dialect=dialect)
-    dp = plan_dynamic(program, machine, shaper, **options)
-    write_dynamic_table(dp, program, out, progress)
-    wall = time.perf_counter() - t0
-    table = TableFile(out)
-    meas = measure_table(table, machine)
-    path = path_deviation(table, machine, program)
-    report = {
-        "input": str(input_path),
-        "machine": machine.name,
-        "table": str(out),
-        "planner": table.header.meta.get("planner"),
-        "total_time_s": (table.header.n_rows - 1) / machine.tick_hz,
-        "unshaped_time_s": dp.job.plan.total_time_s,
-        "n_blocks": program.n_blocks,
-        "n_ticks": table.header.n_rows,
-        "tick_hz": machine.tick_hz,
-        "path_length_mm": dp.job.path_length_mm,
-        "plan_wall_s": wall,
-        "max_abs_v": meas.max_abs_v,
-        "max_abs_a": meas.max_abs_a,
-        "max_abs_j": meas.max_abs_j,
-        "max_path_deviation_mm": path.max_mm,
-        "path_tolerance_mm": path.max_tol_mm,
-        "violations": [str(v) for v in meas.violations + path.violations],
-    }
-    if dp.shapers:
-        sh = next(iter(dp.shapers.values()))
-        report["shaping"] = {
-            "shapers": {a: [s.name, s.f_hz, s.zeta] for a, s in dp.shapers.items()},
-            "duration_s": max(s.duration_s for s in dp.shapers.values()),
-            "hold_ticks": int(dp.sampler.hold),
-            "rest_points": int(dp.sampler.rest.size),
-            "extra_s": dp.sampler.extra_s,
-            "stops_added": dp.n_stops_added,
-            "arc_feed_caps": dp.n_feed_caps,
-            "contour_tol_mm": dp.tol_mm,
-            "vibration_at_design": float(sh.vibration(sh.f_hz, sh.zeta)),
-        }
-    if dp.bands is not None:
-        report["speed_bands"] = {"bands_mm_s": dp.bands.bands.tolist(), "rows_slowed": dp.bands.n_rows_slowed}
-    if simulate and any(a.modes for a in machine.axes):
-        from jaxcnc.dynamics.simulate import simulate_table
-
-        report["dynamics"] = simulate_table(table, machine).summary()
-    if not math.isfinite(report["total_time_s"]):  # pragma: no cover - defensive
-        raise JaxcncError(f"{input_path}: the shaped job has no finite duration")
-    return report

@@ -193,7 +193,7 @@ class ShapingPlan:
         n_stops_added: junctions turned into exact stops (the shaper would round them off further than
             ``tol_mm``).
         n_feed_caps: arcs whose feed was lowered so that the shaper's sagitta stays within ``tol_mm``.
-        tol_mm: the contour error allowed to shaping.
+        tol_mm: the contour error allowed to shaping (the tolerance, at least 1 µm: the sagitta arcs are held to).
     """
 
     program: Program
@@ -263,7 +263,8 @@ def shaping_program(
     capped = arc & (feed > cap)
     new_feed = np.where(capped & ~program.rapid, cap, program.feed)
     prog = dataclasses.replace(program, stop_before=program.stop_before | add_stop, feed=new_feed)
-    return ShapingPlan(prog, int(np.count_nonzero(add_stop)), int(np.count_nonzero(capped & ~program.rapid)), tol)
+    # the contour error shaping may cause: the tolerance, or the 1 µm sagitta arcs are held to when it is 0
+    return ShapingPlan(prog, int(np.count_nonzero(add_stop)), int(np.count_nonzero(capped & ~program.rapid)), tol_eff)
 
 
 # -------------------------------------------------------------------------------------------------

@@ -24,7 +24,9 @@ What is compared with what, tick by tick:
   (``stop_before``: G61.1, the laser switched, a dwell, an event) or where there is no row on one side.
   A tick of a moving row ``r`` may lie up to ``max(J(P, r), J(r, N))`` from the geometry; a tick of a row
   that does not move up to ``J(P, N)``. On top of that a numeric slack of :data:`SLACK_MM` (1e-6 mm).
-  G61 (exact path) therefore allows 1e-6 mm everywhere.
+  G61 (exact path) therefore allows 1e-6 mm everywhere. A table shaped against vibration (issue 20) is allowed,
+  at every tick, the contour error shaping was planned with (header ``shaping_tol_mm``, at most 1 mm): the
+  convolution rounds every curve a little, which is the price of the shaper, stated and bounded.
 * **Distances.** Line segments: closed form. Circular arcs (G17/G18/G19, ``turn`` +1 counter-clockwise
   seen from the plane normal, a full circle where end = start in the plane): exact — the nearest point is
   at the query's angle when that lies in the sweep, else the nearer end. Helices (the normal coordinate
@@ -474,6 +476,9 @@ def path_deviation(
     tolerance allowed there (module docstring). Streams the table ``chunk_rows`` ticks at a time."""
     h = table.header
     geo = ProgramPath(program, machine.path.corner_tol_mm)
+    shaping = h.meta.get("shaping_tol_mm", 0.0)
+    if isinstance(shaping, bool) or not isinstance(shaping, (int, float)) or not 0.0 <= shaping <= 1.0:
+        raise JaxcncError(f"{table.path}: header shaping_tol_mm = {shaping!r}: must be a number in 0..1 mm")
     ev_tick, ev_row = _block_rows(table, program)
     axes = h.axes
     cols = [(i, PROGRAM_AXES.index(a)) for i, a in enumerate(axes) if a in PROGRAM_AXES]
@@ -498,8 +503,9 @@ def path_deviation(
             for other in (geo.prev[row[far]], geo.next[row[far]]):
                 sel = far[other >= 0]
                 dist[sel] = np.minimum(dist[sel], geo.distance(p[sel], other[other >= 0]))
-            allowed = geo.allowed[row] + slack_mm
-            max_tol = max(max_tol, float(geo.allowed[row].max()))
+            tol_row = np.maximum(geo.allowed[row], shaping)
+            allowed = tol_row + slack_mm
+            max_tol = max(max_tol, float(tol_row.max()))
             j = int(np.argmax(dist))
             if dist[j] > best:
                 best, worst_tick = float(dist[j]), s + j
@@ -530,7 +536,7 @@ def path_deviation(
         worst_tick=worst_tick,
         worst_row=worst_row,
         worst_line=int(program.line[worst_row]),
-        allowed_at_worst_mm=float(geo.allowed[worst_row] + slack_mm),
+        allowed_at_worst_mm=float(max(geo.allowed[worst_row], shaping) + slack_mm),
         n_over=n_over,
         max_away_mm=away_max if n_away else math.nan,
         n_away=n_away,
