@@ -129,7 +129,7 @@ def test_sim_without_limits_an_interrupt_stops_the_drives_at_once(job):
 
 def _receiver(m, a_max, rec, *extra):
     a = ",".join(str(x) for x in a_max / m.discrete_mm)
-    return spawn("tcp://127.0.0.1:0", "--record", str(rec), "--a-max", a, "--speed", "1", *extra)
+    return spawn("tcp://127.0.0.1:0", "--record", str(rec), "--a-max-disc", a, "--speed", "1", *extra)
 
 
 def test_stream_player_error_sends_stop_the_receiver_ramps_down_with_the_laser_off(job, tmp_path):

@@ -229,7 +229,7 @@ def test_a_busy_refusal_with_rows_executed_is_final():
     from jaxcnc.hw.receiver import Receiver
     from jaxcnc.hw.stream import decode
 
-    r = Receiver(capacity=4096, a_max=np.full(2, 1e9))
+    r = Receiver(capacity=4096, a_max_disc_s2=np.full(2, 1e9))
     hello = Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=5)
     w = decode(r.handle(hello.encode(), "a", now=0.0).data)
     refusal = decode(r.handle(Frame(HELLO, 2, seq=1, count=10, aux=1_000_000, nonce=6).encode(), "b", now=0.5).data)
@@ -275,7 +275,7 @@ def test_player_restart_mid_job_is_refused_and_the_receiver_stops_safely(job, tm
     the path, its idle timeout ends the job in one line and the recording is complete."""
     m, table, a_max, _ = job
     rec = tmp_path / "rec.npy"
-    opts = ("--record", str(rec), "--speed", "1", "--a-max", _a_max_option(m, a_max), "--idle-timeout", "3")
+    opts = ("--record", str(rec), "--speed", "1", "--a-max-disc", _a_max_option(m, a_max), "--idle-timeout", "3")
     proc, addr = spawn("tcp://127.0.0.1:0", *opts)
     first = second = None
     try:
@@ -434,7 +434,7 @@ def test_receiver_idle_timeout_is_one_line_and_the_recording_is_complete(job, tm
     m, table, a_max, _ = job
     rec = tmp_path / "rec.npy"
     opts = ("--record", str(rec), "--speed", "10", "--capacity", "8192", "--idle-timeout", "1")
-    proc, addr = spawn("tcp://127.0.0.1:0", *opts, "--a-max", _a_max_option(m, a_max))
+    proc, addr = spawn("tcp://127.0.0.1:0", *opts, "--a-max-disc", _a_max_option(m, a_max))
     try:
         sink = StreamSink(addr)
         sink.open(table.header)

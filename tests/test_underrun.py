@@ -107,7 +107,7 @@ def test_receiver_ramps_down_when_the_player_is_late_and_the_player_reports_it(l
     m, table, a_max = line
     rec = tmp_path / "rec.npy"
     a = ",".join(str(x) for x in a_max / m.discrete_mm)
-    opts = ("--record", str(rec), "--speed", "4", "--capacity", "8192", "--a-max", a, "--idle-timeout", "20")
+    opts = ("--record", str(rec), "--speed", "4", "--capacity", "8192", "--a-max-disc", a, "--idle-timeout", "20")
     proc, addr = spawn("tcp://127.0.0.1:0", *opts)
     try:
         sink = _LateStreamSink(addr)

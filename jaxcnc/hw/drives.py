@@ -28,9 +28,9 @@ from jaxcnc.hw.timewarp import SAFETY
 
 
 class DriveClock:
-    """Buffer and clock of ``n_axes`` drives at ``tick_hz``; ``a_max`` per axis in discretes/s².
+    """Buffer and clock of ``n_axes`` drives at ``tick_hz``; ``a_max_disc_s2`` per axis in discretes/s².
 
-    Without ``a_max`` the clock cannot ramp: on underrun the drives hold the last row (counted in
+    Without ``a_max_disc_s2`` the clock cannot ramp: on underrun the drives hold the last row (counted in
     ``hard_stops``). ``reserve``: rows kept for a ramp-down; ``resume``: rows needed to restart.
     """
 
@@ -38,13 +38,13 @@ class DriveClock:
         self,
         n_axes: int,
         tick_hz: float,
-        a_max: np.ndarray | None = None,
+        a_max_disc_s2: np.ndarray | None = None,
         reserve: int = 2048,
         resume: int = 4096,
     ):
         self.n_axes, self.f = n_axes, float(tick_hz)
-        self.a_max = None if a_max is None else np.asarray(a_max, dtype=np.float64)
-        self.reserve = reserve if a_max is not None else 0
+        self.a_max_disc_s2 = None if a_max_disc_s2 is None else np.asarray(a_max_disc_s2, dtype=np.float64)
+        self.reserve = reserve if a_max_disc_s2 is not None else 0
         self.resume = max(resume, self.reserve)
         self._chunks: deque[np.ndarray] = deque()
         self.queued = 0  # rows buffered, not yet taken
@@ -54,7 +54,7 @@ class DriveClock:
         self.last = np.zeros(n_axes, np.int64)  # rows executed and executed - 1
         self.last2 = np.zeros(n_axes, np.int64)
         self.underruns = 0  # ramp-downs (or hard stops) for want of rows
-        self.hard_stops = 0  # the buffer ended before the ramp reached rest (or no a_max)
+        self.hard_stops = 0  # the buffer ended before the ramp reached rest (or no a_max_disc_s2)
         self.held_ticks = 0  # servo ticks spent at rest waiting for rows
         self._down = False  # ramping down (or at rest) for want of rows
         self.stopping = False  # stop(): ramping down for good
@@ -65,9 +65,9 @@ class DriveClock:
 
     def stop(self) -> None:
         """Stop for good (an abort, a lost player): from now the rate ramps to 0 within the buffered
-        rows and stays there; rows left in the buffer are never taken. Without ``a_max`` the drives
+        rows and stays there; rows left in the buffer are never taken. Without ``a_max_disc_s2`` the drives
         stop at once (a hard stop)."""
-        if not self.stopping and self.rate > 0 and self.a_max is None:
+        if not self.stopping and self.rate > 0 and self.a_max_disc_s2 is None:
             self.hard_stops += 1
         self.stopping = True
 
@@ -168,7 +168,7 @@ class DriveClock:
             elif self.queued < max(self.reserve, 1):
                 if not self._down:
                     self.underruns += 1
-                    self.hard_stops += self.a_max is None
+                    self.hard_stops += self.a_max_disc_s2 is None
                 target, self._down = 0.0, True
             else:
                 target = self.rate  # between reserve and resume: carry on as we are
@@ -194,7 +194,7 @@ class DriveClock:
 
     def _r_dot(self) -> float:
         """The fastest rate change the next row interval's spare acceleration allows (1/s)."""
-        if self.a_max is None:
+        if self.a_max_disc_s2 is None:
             return np.inf  # no limits known: the rate jumps (a hard stop)
         r1 = self._peek(1)[0].astype(np.int64)
         v = (r1 - self.last) * self.f  # discretes/s, table time
@@ -202,7 +202,7 @@ class DriveClock:
         moving = np.abs(v) > 0
         if not moving.any():
             return np.inf
-        spare = np.maximum(self.a_max - np.abs(a) * self.rate**2, 0.0)
+        spare = np.maximum(self.a_max_disc_s2 - np.abs(a) * self.rate**2, 0.0)
         return SAFETY * float(np.min(spare[moving] / np.abs(v[moving])))
 
     def _step(self, target: float, ended: bool) -> tuple[np.ndarray | None, np.ndarray]:
@@ -213,7 +213,7 @@ class DriveClock:
         step = self._r_dot() / self.f
         new = self.rate + float(np.clip(target - self.rate, -step, step))
         # table ticks played in this servo tick (the mean rate; without limits the rate jumps)
-        dt = new if self.a_max is None else 0.5 * (self.rate + new)
+        dt = new if self.a_max_disc_s2 is None else 0.5 * (self.rate + new)
         room = self.queued - self.frac  # table time left in the buffer
         if dt >= room and not ended:
             dt, new = room, 0.0  # the ramp did not fit the buffer: stop at its last row

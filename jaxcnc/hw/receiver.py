@@ -13,8 +13,8 @@ It listens on loopback unless ``--allow-network`` is given. With a shared key (`
 
 Clock: execution starts when the buffer is half full (double buffering) or the job's last row has
 arrived. If the buffer runs low before the end (a slow player or a lost link) the drives ramp down
-along the path within ``--a-max`` and wait at rest until the buffer is half full again, then ramp
-back up (:class:`~jaxcnc.hw.drives.DriveClock`); without ``--a-max`` they can only hold the last row.
+along the path within ``--a-max-disc`` and wait at rest until the buffer is half full again, then ramp
+back up (:class:`~jaxcnc.hw.drives.DriveClock`); without ``--a-max-disc`` they can only hold the last row.
 The laser (the LASER events the DATA frames carry) is off whenever the drives wait at rest.
 
 Exit status: 0 the job was done; 1 it ended early — the player stopped it (STOP), or no frame came
@@ -85,7 +85,7 @@ class Reply:
 
 
 class Receiver:
-    """The controller model and its session. ``a_max``: per-axis limits in discretes/s² (enables
+    """The controller model and its session. ``a_max_disc_s2``: per-axis limits in discretes/s² (enables
     ramp-downs); ``key``: the shared key (frames must carry its tag)."""
 
     def __init__(
@@ -93,11 +93,11 @@ class Receiver:
         capacity: int = 8192,
         speed: float = 1.0,
         record: str | None = None,
-        a_max: np.ndarray | None = None,
+        a_max_disc_s2: np.ndarray | None = None,
         key: bytes | None = None,
         log=None,
     ):
-        self.capacity, self.speed, self.record_path, self.a_max = capacity, speed, record, a_max
+        self.capacity, self.speed, self.record_path, self.a_max_disc_s2 = capacity, speed, record, a_max_disc_s2
         self.key = key
         self.log = log if log is not None else (lambda line: None)
         self.session: int | None = None
@@ -288,7 +288,7 @@ class Receiver:
             self.recorder.close()
         self.n_axes, self.tick_hz = f.n_axes, f.aux / 1000.0
         reserve = self.capacity // 4
-        self.clock = DriveClock(self.n_axes, self.tick_hz, self.a_max, reserve, self.capacity // 2)
+        self.clock = DriveClock(self.n_axes, self.tick_hz, self.a_max_disc_s2, reserve, self.capacity // 2)
         self.recorder = RowRecorder(self.n_axes, self.record_path)
         self.power, self.power_seen, self.events_crc, self.events_run = LaserOutput(keep=False), False, 0, 0
         if self.record_path:
@@ -641,19 +641,23 @@ def main(argv: list[str] | None = None) -> int:
         help="a file holding the shared key (at least 16 bytes) that signs every frame; else $JAXCNC_STREAM_KEY if set",
     )
     ap.add_argument(
-        "--a-max",
-        help="the drives' acceleration limits, discretes/s² per axis in table order (comma-separated): on "
-        "underrun the drives ramp down along the path within them; without, they hold the last row",
+        "--a-max-disc",
+        "--a-max",  # the older name, kept for scripts
+        dest="a_max_disc",
+        metavar="A,B,...",
+        help="the drives' acceleration limits in DISCRETES/s² (not mm/s²), per axis in table order "
+        "(comma-separated): on underrun the drives ramp down along the path within them; without, they hold the "
+        "last row",
     )
     args = ap.parse_args(argv)
     try:
-        a_max = np.array([float(x) for x in args.a_max.split(",")]) if args.a_max else None
-        if a_max is not None and not (np.all(np.isfinite(a_max)) and np.all(a_max > 0)):
-            raise ValueError("--a-max: limits must be positive numbers")
+        a_disc = np.array([float(x) for x in args.a_max_disc.split(",")]) if args.a_max_disc else None
+        if a_disc is not None and not (np.all(np.isfinite(a_disc)) and np.all(a_disc > 0)):
+            raise ValueError("--a-max-disc: limits must be positive numbers")
         if args.capacity < 4 or not (np.isfinite(args.speed) and args.speed > 0) or not args.idle_timeout > 0:
             raise ValueError("--capacity must be at least 4, --speed and --idle-timeout positive")
         key = load_key(args.key_file)
-        receiver = Receiver(args.capacity, args.speed, args.record, a_max, key, log=_log)
+        receiver = Receiver(args.capacity, args.speed, args.record, a_disc, key, log=_log)
         stats = serve(args.listen, receiver, args.idle_timeout, allow_network=args.allow_network)
     except ValueError as exc:
         print(f"receiver: error: {exc}", file=sys.stderr)

@@ -60,8 +60,8 @@ class SimSink:
         keep = self.keep or (self.keep is None and small)
         self._rec = RowRecorder(header.n_axes, self.record_path, keep=keep)
         self.laser = LaserOutput(keep=keep)
-        a_max = None if self.a_max_mm is None else self.a_max_mm / header.discrete_mm
-        self.clock = DriveClock(header.n_axes, header.tick_hz, a_max, self.buffer_rows // 4, self.buffer_rows // 2)
+        a_disc = None if self.a_max_mm is None else self.a_max_mm / header.discrete_mm  # mm/s² -> discretes/s²
+        self.clock = DriveClock(header.n_axes, header.tick_hz, a_disc, self.buffer_rows // 4, self.buffer_rows // 2)
         self._t0 = time.perf_counter()
 
     def free_rows(self) -> int:
