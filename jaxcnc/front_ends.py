@@ -154,12 +154,47 @@ class HpglFrontEnd(DxfFrontEnd):
         return read_hpgl(path, start_mm, options)
 
 
+class ImageFrontEnd(FrontEnd):
+    """Raster images, PNG/BMP/TIFF through Pillow (:mod:`jaxcnc.io.image`): engraved line by line at constant speed
+    with overscan, each tick's power read from the image. Options: :class:`~jaxcnc.io.image.RasterOptions`."""
+
+    name = "raster image"
+    produces = "program"
+    options = (
+        "pixel_mm",
+        "dpi",
+        "width_mm",
+        "feed_mm_s",
+        "power",
+        "power_min",
+        "dither",
+        "threshold",
+        "unidirectional",
+        "angle_deg",
+        "overscan_mm",
+        "bidir_offset_mm",
+    )
+
+    def load(self, path: Path, machine: MachineConfig, **options: Any) -> Program:
+        return self.raster(path, machine, **options).program
+
+    def raster(self, path: Path, machine: MachineConfig, **options: Any):
+        """The :class:`~jaxcnc.io.image.Raster` (Program with its image map, scan lines)."""
+        from jaxcnc.io.image import raster_job, raster_options
+
+        self.refuse_options(path, options)
+        return raster_job(path, machine, raster_options(path, options))
+
+
+IMAGE_SUFFIXES = (".png", ".bmp", ".tif", ".tiff")
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".tap", ".g", ".cnc")
 POINT_SUFFIXES = (".xyz", ".csv")
 DRAWING_SUFFIXES = (".dxf", ".plt", ".hpgl")
 FRONT_ENDS.register("dxf", DxfFrontEnd)
 FRONT_ENDS.register("plt", HpglFrontEnd)
 FRONT_ENDS.register("hpgl", HpglFrontEnd)
+for _suffix in IMAGE_SUFFIXES:
+    FRONT_ENDS.register(_suffix[1:], ImageFrontEnd)
 for _suffix in GCODE_SUFFIXES:
     FRONT_ENDS.register(_suffix[1:], GCodeFrontEnd)
 for _suffix in POINT_SUFFIXES:
@@ -199,6 +234,8 @@ __all__ = [
     "DxfFrontEnd",
     "FrontEnd",
     "HpglFrontEnd",
+    "IMAGE_SUFFIXES",
+    "ImageFrontEnd",
     "GCodeFrontEnd",
     "PointFileFrontEnd",
     "front_end_for",
