@@ -90,11 +90,14 @@ def write_samples(
     meta: dict,
     progress: bool | None = None,
     power: bool = True,
+    power_scale=None,
 ) -> Path:
     """Write a table file from a sampler's chunks of exact machine-axis positions and the events.
 
     ``progress``: show a progress bar (``None``: only on a terminal). ``power``: write the laser power channel
     (:func:`jaxcnc.ticks.laser.power_of_rows`: M3 constant, M4 scaled with the speed over each tick).
+    ``power_scale``: a function of the positions ``(m+1, n_axes)`` of ticks ``first .. first+m`` giving ``(m,)``
+    factors on that power (a raster image's level under each tick, :func:`jaxcnc.ticks.raster.raster_levels`).
     """
     m = machine
     with TableWriter(
@@ -118,7 +121,12 @@ def write_samples(
 
         def put(first: int, p: np.ndarray, after: np.ndarray) -> None:
             pos, fine = quantize(p, m.discrete_mm)
-            lit = power_of_rows(np.vstack([p, after]), events, first, m.tick_hz, m.laser) if power else None
+            lit = None
+            if power:
+                pa = np.vstack([p, after])
+                lit = power_of_rows(pa, events, first, m.tick_hz, m.laser)
+                if power_scale is not None:
+                    lit = (lit * power_scale(pa)).astype(np.float32)
             w.write(np.asarray(pos), np.asarray(fine), lit)
             bar.update(p.shape[0])
 
@@ -182,7 +190,18 @@ def write_table(
         home = np.array([m.axis(a).home for a in m.axis_names])
         start = machine_axes(job.program.start[:1], np.asarray(job.axis_source), home)[0]
     more = {"source_options": dict(source_options)} if source_options else {}
+    image = getattr(job.program, "raster", None)  # a raster image (jaxcnc.io.image.RasterProgram)
+    scale = None
+    if image is not None:
+        from jaxcnc.ticks.raster import axes_xy, raster_levels
+
+        xy = axes_xy(m.axis_names)
+        more.update(raster=image.record(), constant_speed_laser=True)
+
+        def scale(p: np.ndarray) -> np.ndarray:
+            return raster_levels(image, p, xy)
+
     meta = table_meta(
         m, job.program.file, planner, job.plan.total_time_s, start_mm=start, n_blocks=job.program.n_blocks, **more
     )
-    return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress)
+    return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress, power_scale=scale)

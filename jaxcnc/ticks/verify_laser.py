@@ -35,6 +35,10 @@ class LaserCheck:
     max_speed_deviation: float = 0.0
     constant_speed: bool = False
     violations: list[Violation] = field(default_factory=list)
+    #: raster jobs: the energy each pixel received against the image (axis-aligned scans), and why the pixel
+    #: powers were not checked when they were not (the source image is not here).
+    pixels: object = None
+    raster_note: str = ""
 
 
 def _held(events: np.ndarray, kind: int, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,6 +56,13 @@ def check_laser(
         return None
     las = machine.laser
     out = LaserCheck(constant_speed=bool(h.meta.get("constant_speed_laser")))
+    image = None
+    if "raster" in h.meta:  # a raster image: each lit tick's power is S times the level under it
+        from jaxcnc.ticks.raster import axes_xy, pixel_energy, pixel_of, raster_of_table
+
+        image, out.raster_note = raster_of_table(table, machine)
+        xy = axes_xy(h.axes)
+        energy = np.zeros(image.levels.size if image is not None else 0)
     bad_power: list[tuple[int, int, float]] = []
     bad_speed: list[tuple[int, int, float]] = []
     with TableRows(table) as rows:
@@ -70,8 +81,16 @@ def check_laser(
             m4 = (mode == 4) & (feed > 0)
             want = np.where(mode == 0, 0.0, s * np.where(m4, np.maximum(ratio, las.m4_floor), 1.0))
             got = table.read_power(start, stop).astype(np.float64)
+            if image is not None:
+                pix = pixel_of(image, p, xy)
+                lv = np.where(pix >= 0, image.levels.reshape(-1)[np.maximum(pix, 0)], 0.0)
+                want = want * lv
+                on = (got > 0) & (pix >= 0)
+                energy += np.bincount(pix[on], weights=got[on] / h.tick_hz, minlength=energy.size)
+            elif "raster" in h.meta:
+                want = np.minimum(want, got)  # the levels are not here: only "never above S" is checked
             err = np.abs(got - want) / np.maximum(s, 1e-12)
-            err = np.where((mode == 0) & (got == 0), 0.0, np.where(mode == 0, np.inf, err))
+            err = np.where((want == 0) & (got == 0), 0.0, np.where(mode == 0, np.inf, err))
             out.n_lit += int((got > 0).sum())
             out.n_m4 += int(m4.sum())
             out.max_power_error = max(out.max_power_error, float(err.max(initial=0.0)))
@@ -83,6 +102,15 @@ def check_laser(
                 out.max_speed_deviation = max(out.max_speed_deviation, float(dev.max(initial=0.0)))
                 for r0, r1 in _runs(dev > speed_tol):
                     bad_speed.append((start + r0, start + r1, float(dev[r0 : r1 + 1].max())))
+    if image is not None:
+        out.pixels = pixel_energy(image, energy, h.tick_hz, speed_tol)
+        if out.pixels is not None and out.pixels.n_bad:
+            r, c = divmod(out.pixels.bad[0], image.levels.shape[1])
+            why = (
+                f"{out.pixels.n_bad} pixels (first: row {r}, column {c}) received an energy "
+                f"{out.pixels.max_error_ticks:.3g} ticks' worth away from S · level · pixel / F"
+            )
+            out.violations.append(Violation(0, h.n_rows - 1, why, "laser", out.pixels.max_error_ticks, 1.0))
     for r0, r1, e in _merge(bad_power):
         why = f"power differs from the mode, S, feed and speed by {e:.3g} of S (allowed {POWER_TOL:g})"
         out.violations.append(Violation(r0, r1, why, "laser", e, POWER_TOL))
