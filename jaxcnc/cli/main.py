@@ -87,6 +87,17 @@ def _drawing_options(args: argparse.Namespace) -> dict:
         "power": args.power,
         "lead_in_mm": args.lead_in,
         "layers": tuple(x.strip() for x in args.layers.split(",")) if args.layers is not None else None,
+        # raster images (issue 16; docs/laser.md)
+        "pixel_mm": args.pixel,
+        "dpi": args.dpi,
+        "width_mm": args.width,
+        "power_min": args.power_min,
+        "dither": args.dither,
+        "threshold": args.threshold,
+        "unidirectional": True if args.unidirectional else None,
+        "angle_deg": args.scan_angle,
+        "overscan_mm": args.overscan,
+        "bidir_offset_mm": args.bidir_offset,
     }
 
 
@@ -310,6 +321,12 @@ def cmd_check(args: argparse.Namespace) -> int:
                 f"  laser: {lc.n_lit} ticks lit ({lc.n_m4} under M4), the power channel within "
                 f"{lc.max_power_error:.2g} of S of its mode, feed and speed at every tick"
             )
+            if lc.constant_speed:
+                print(f"  raster: lit only at the feed (within {lc.max_speed_deviation:.2g} of it)", end="")
+                if lc.pixels is not None:
+                    px = lc.pixels
+                    print(f"; {px.n_pixels} pixels each within {px.max_error_ticks:.3g} tick of its energy", end="")
+                print(f"; {lc.raster_note}" if lc.raster_note else "")
         if dynamics:
             print(*dynamics, sep="\n")
         return 0
@@ -548,6 +565,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.scanner import run_scanner_benchmarks
 
         results["scanner"] = run_scanner_benchmarks(repeats=args.repeats)
+    if args.suite in ("all", "raster"):
+        from jaxcnc.bench.raster import run_raster_benchmark
+
+        results["raster"] = run_raster_benchmark(repeats=min(args.repeats, 2))  # 1M G-code lines a run
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
@@ -670,6 +691,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="entity ends closer than this are chained; pieces within it are duplicates (default: 0.01)",
     )
     g.add_argument("--layers", metavar="A,B", help="DXF: cut only these layers (default: every visible one)")
+    g = sp.add_argument_group(
+        "raster images (.png, .bmp, .tif)",
+        "engraved line by line at constant speed (--feed, --power: S at black); the table records them for `check`",
+    )
+    g.add_argument("--pixel", type=float, metavar="MM", help="pixel size and line pitch (default: the file's DPI)")
+    g.add_argument("--dpi", type=float, help="resolution in dots per inch (instead of --pixel)")
+    g.add_argument("--width", type=float, metavar="MM", help="engraved width (resampled when a resolution is given)")
+    g.add_argument("--power-min", type=float, metavar="FRACTION", help="power at the lightest grey (default: 0)")
+    g.add_argument("--dither", choices=("none", "threshold", "floyd-steinberg"), help="default: none (greyscale)")
+    g.add_argument("--threshold", type=int, metavar="GREY", help="threshold dithering: black below this (default 128)")
+    g.add_argument("--unidirectional", action="store_true", help="every line the same way (default: serpentine)")
+    g.add_argument("--scan-angle", type=float, metavar="DEG", help="the scan lines' angle to X (default: 0)")
+    g.add_argument("--overscan", type=float, metavar="MM", help="unlit run before/after lines (default: as needed)")
+    g.add_argument("--bidir-offset", type=float, metavar="MM", help="reverse lines fire this far early (default: 0)")
     sp.add_argument("--kinematics", help="split jobs: write the per-tick kinematic table here (CSV)")
     sp.add_argument("--split-plot", help="split jobs: draw S, S1, S2 and the field here (PNG)")
     sp.add_argument(
@@ -852,6 +887,7 @@ def build_parser() -> argparse.ArgumentParser:
             "split",
             "vibration",
             "scanner",
+            "raster",
         ),
         help="which benchmarks (default: %(default)s)",
     )
