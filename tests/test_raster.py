@@ -156,3 +156,25 @@ def test_broken_image_is_one_line_error(tmp_path, machine_path, junk, suffix, cu
         front_end_for(bad).load(bad, m, pixel_mm=0.1)
     except JaxcncError as exc:
         assert str(bad) in str(exc) and "\n" not in str(exc)
+
+
+def test_cli_plan_check_and_broken_png(tmp_path, machine_path, capsys):
+    from jaxcnc.cli.main import main
+
+    img = _image(tmp_path)
+    out = tmp_path / "cli.ticks"
+    argv = ["plan", str(img), "--machine", str(machine_path), "-o", str(out), "-q", "--pixel", "0.1"]
+    assert main([*argv, "--feed", "40", "--dither", "threshold", "--unidirectional"]) == 0
+    assert TableFile(out).header.meta["source_options"] == {
+        "pixel_mm": 0.1,
+        "feed_mm_s": 40.0,
+        "dither": "threshold",
+        "unidirectional": True,
+    }
+    assert main(["check", str(out), "--machine", str(machine_path)]) == 0
+    assert "raster: lit only at the feed" in capsys.readouterr().out
+    bad = tmp_path / "broken.png"
+    bad.write_bytes(img.read_bytes()[:60])
+    assert main(["plan", str(bad), "--machine", str(machine_path), "-o", str(tmp_path / "b.ticks")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert str(bad) in err and "\n" not in err
