@@ -178,3 +178,16 @@ def test_cli_plan_check_and_broken_png(tmp_path, machine_path, capsys):
     assert main(["plan", str(bad), "--machine", str(machine_path), "-o", str(tmp_path / "b.ticks")]) == 2
     err = capsys.readouterr().err.strip()
     assert str(bad) in err and "\n" not in err
+
+
+def test_row_fast_path_equals_sampled_lines(tmp_path, machine_path):
+    """At 0° the lines are read from the grid's rows; a hair off 0° they are sampled: the same lines."""
+    from jaxcnc.io.image import scan_lines
+
+    r = raster_job(_image(tmp_path), load_machine(machine_path), RasterOptions(pixel_mm=0.1, feed_mm_s=50))
+    img = r.image
+    tilted = type(img)(img.levels, img.origin_mm, img.pixel_mm, 1e-12, img.power, img.feed_mm_s)
+    for uni in (False, True):
+        fast, sampled = scan_lines(img, uni), scan_lines(tilted, uni)
+        for a, b in zip(fast, sampled, strict=True):
+            np.testing.assert_allclose(a, b, atol=1e-9)

@@ -279,17 +279,23 @@ def scan_lines(image: RasterMap, unidirectional: bool) -> tuple[np.ndarray, np.n
     ds = px / SAMPLES_PER_PIXEL
     n_s = max(1, math.ceil((s_hi - s_lo) / ds - 1e-9))
     s = s_lo + (np.arange(n_s) + 0.5) * ds
-    lit = np.zeros((n_t, n_s), bool)
-    step = max(1, (1 << 22) // n_s)  # bounded memory: lines in batches
-    origin = image.origin_mm
-    for a in range(0, n_t, step):  # batches of lines, each batch vectorised
-        tt = t[a : a + step]
-        xy = tt[:, None, None] * wv + s[None, :, None] * u + origin
-        lit[a : a + step] = image.level_at(xy.reshape(-1, 2)).reshape(tt.size, n_s) > 0
-    any_lit = lit.any(axis=1)
-    first = np.argmax(lit, axis=1)
-    last = n_s - 1 - np.argmax(lit[:, ::-1], axis=1)
-    t, s0, s1 = t[any_lit], s[first[any_lit]] - ds / 2, s[last[any_lit]] + ds / 2
+    if image.angle_deg % 360 == 0:  # lines along the pixel rows, bottom row first: read the grid directly
+        lit = image.levels[::-1] > 0
+        any_lit = lit.any(axis=1)
+        first = np.argmax(lit, axis=1)
+        last = w - 1 - np.argmax(lit[:, ::-1], axis=1)
+        t, s0, s1 = t[any_lit], first[any_lit] * px, (last[any_lit] + 1) * px
+    else:
+        lit = np.zeros((n_t, n_s), bool)
+        step = max(1, (1 << 22) // n_s)  # bounded memory: lines in batches
+        for a in range(0, n_t, step):  # batches of lines, each batch vectorised
+            tt = t[a : a + step]
+            xy = tt[:, None, None] * wv + s[None, :, None] * u + image.origin_mm
+            lit[a : a + step] = image.level_at(xy.reshape(-1, 2)).reshape(tt.size, n_s) > 0
+        any_lit = lit.any(axis=1)
+        first = np.argmax(lit, axis=1)
+        last = n_s - 1 - np.argmax(lit[:, ::-1], axis=1)
+        t, s0, s1 = t[any_lit], s[first[any_lit]] - ds / 2, s[last[any_lit]] + ds / 2
     if not unidirectional:
         back = np.arange(t.size) % 2 == 1
         s0, s1 = np.where(back, s1, s0), np.where(back, s0, s1)
