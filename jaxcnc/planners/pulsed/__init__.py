@@ -20,8 +20,9 @@ import numpy as np
 from jaxcnc.errors import SourceError
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import outside_travel
-from jaxcnc.planners.protocol import request_limits, with_margin
+from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
 from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (register the planners)
+from jaxcnc.planners.pulsed.bound import lower_bound_travel
 from jaxcnc.planners.pulsed.request import (
     PulsePlan,
     PulseRequest,
@@ -64,6 +65,12 @@ class PlannedPoints:
     def lower_bound_s(self) -> float:
         """Intervals between work pulses × the shortest period the lamp allows."""
         return (len(self.job) - 1) * self.window.shortest_period_s
+
+    @property
+    def lower_bound_travel_s(self) -> float:
+        """A certified bound that also counts travel across gaps (:mod:`.bound`), at the machine's limits."""
+        v_max, a_max, _ = machine_limits(self.machine)
+        return lower_bound_travel(self.job.points, self.window, v_max, a_max).seconds
 
 
 def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
