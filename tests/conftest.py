@@ -82,3 +82,26 @@ def corpus_file(name: str) -> Path:
     if not hits:
         pytest.skip(f"corpus file *{name}* not available (../shared/corpus is absent)")
     return hits[0]
+
+
+#: A galvo scanner's x/y beam axes at 100 kHz, 1 µm discretes (the scanner tests add [path], [galvo], ...).
+GALVO_XY = """[machine]
+name = "galvo"
+tick_hz = 100000
+discrete_mm = 0.001
+[axes.x]
+v_max = 5000.0
+a_max = 2000000.0
+min = -50.0
+max = 50.0
+[axes.y]
+v_max = 5000.0
+a_max = 2000000.0
+min = -50.0
+max = 50.0
+"""
+#: The galvo tests' contour speeds: 1 m/s marks, 5 m/s jumps.
+GALVO_PATH = """[path]
+feed = 1000.0
+rapid = 5000.0
+"""

@@ -13,26 +13,9 @@ from jaxcnc.scanner.compile import NO_DELAYS, auto_settings, compile_board, comp
 from jaxcnc.scanner.emulator import emulate, write_table
 from jaxcnc.scanner.head import HeadModel
 from jaxcnc.scanner.metrics import burn_figures
+from tests.conftest import GALVO_PATH, GALVO_XY
 
-GALVO = """[machine]
-name = "galvo"
-tick_hz = 100000
-discrete_mm = 0.001
-[axes.x]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[axes.y]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[path]
-feed = 1000.0
-rapid = 5000.0
-corner_tol_mm = 0.0
-"""
+GALVO = GALVO_XY + GALVO_PATH + "corner_tol_mm = 0.0\n"
 
 # a "Z" with 30-degree corners, a zigzag of 0.4 mm segments and a triangle with a 20-degree tip
 MARKING = """G21 G90

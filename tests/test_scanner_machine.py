@@ -8,25 +8,9 @@ from jaxcnc.cli.main import main
 from jaxcnc.errors import MachineFileError
 from jaxcnc.machine import parse_machine
 from jaxcnc.scanner.head import HeadModel
+from tests.conftest import GALVO_PATH, GALVO_XY
 
-BASE = """[machine]
-name = "galvo"
-tick_hz = 100000
-discrete_mm = 0.001
-[axes.x]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[axes.y]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[path]
-feed = 1000.0
-rapid = 5000.0
-"""
+BASE = GALVO_XY + GALVO_PATH
 GALVO = (
     BASE
     + """[galvo]

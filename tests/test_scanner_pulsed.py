@@ -17,30 +17,18 @@ from jaxcnc.scanner.compile import compile_pulsed
 from jaxcnc.scanner.emulator import emulate
 from jaxcnc.scanner.head import HeadModel
 from jaxcnc.ticks.verify_pulses import check_pulses
+from tests.conftest import GALVO_PATH, GALVO_XY
 
-MACHINE = """[machine]
-name = "galvo-pulsed"
-tick_hz = 100000
-discrete_mm = 0.001
-[axes.x]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[axes.y]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[axes.z]
+MACHINE = (
+    GALVO_XY.replace('name = "galvo"', 'name = "galvo-pulsed"')
+    + """[axes.z]
 v_max = 100.0
 a_max = 10000.0
 min = -1.0
 max = 1.0
-[path]
-feed = 1000.0
-rapid = 5000.0
-[laser]
+"""
+    + GALVO_PATH
+    + """[laser]
 mode = "pulsed"
 pulse_hz = 1000.0
 tolerance = 0.05
@@ -48,6 +36,7 @@ tolerance = 0.05
 tracking_error_s = 150e-6
 mirror_a_max_mm_s2 = 5e6
 """
+)
 
 
 @pytest.fixture(scope="module")

@@ -11,29 +11,17 @@ from jaxcnc.hw.player import play
 from jaxcnc.hw.sinks import open_sink
 from jaxcnc.hw.sinks.scanner import ScannerSink
 from jaxcnc.jobs import plan_file
+from tests.conftest import GALVO_PATH, GALVO_XY
 
-GALVO = """[machine]
-name = "galvo"
-tick_hz = 100000
-discrete_mm = 0.001
-[axes.x]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[axes.y]
-v_max = 5000.0
-a_max = 2000000.0
-min = -50.0
-max = 50.0
-[path]
-feed = 1000.0
-rapid = 5000.0
-corner_tol_mm = 0.0
+GALVO = (
+    GALVO_XY
+    + GALVO_PATH
+    + """corner_tol_mm = 0.0
 [galvo]
 tracking_error_s = 150e-6
 mirror_a_max_mm_s2 = 5e6
 """
+)
 # corners, short segments, arcs, two power levels, dark jumps
 JOB = """G21 G90
 G0 X0 Y0
