@@ -6,9 +6,10 @@ Given them, the motion is the C² spline through the points at their pulse insta
 each point exactly at its pulse and never stops there. Each ``d_i`` must be admissible
 (``m n_min <= d_i <= m n_max`` for ``m - 1`` idle pulses, :mod:`~jaxcnc.planners.pulsed.windows`).
 
-The iteration starts from the shortest admissible times (one period per point, or the time the
-feed needs) and stretches only where a limit is exceeded. Slowing an interval by a factor ``λ``
-divides its velocities by ``λ``, accelerations by ``λ²``, jerks by ``λ³``; so each interval takes
+The iteration starts from the shortest admissible times (one period per point, the time the feed
+needs, or a jump's time under the axes' speed envelope, :func:`_jump_ticks`) and stretches only
+where a limit is exceeded. Slowing an interval by a factor ``λ`` divides its velocities by ``λ``,
+accelerations by ``λ²``, jerks by ``λ³``; so each interval takes
 
     λ_i = max( |v|/v_max, sqrt(|a|/a_max), cbrt(|j|/j_max), |v_path|/feed )   (exact maxima)
 
@@ -30,6 +31,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError, SourceError
+from jaxcnc.planners.pulsed.bound import tent_time_s
 from jaxcnc.planners.pulsed.request import PulsePlan, PulseRequest, register_pulse_planner
 from jaxcnc.planners.pulsed.spline import cubic_coefficients, interval_extremes, spline_moments
 from jaxcnc.planners.pulsed.trajectory import Trajectory
@@ -85,6 +87,22 @@ def solve_durations(
     return d, m, c, it, jnp.max(jnp.where(real, lam, 0.0))
 
 
+def _jump_ticks(y: np.ndarray, req: PulseRequest) -> np.ndarray:
+    """A first guess of each interval's ticks ``(m-1,)`` from the axes' speed envelope (:mod:`.bound`).
+
+    Each axis enters and leaves the move at its neighbours' mean speeds over one shortest period and
+    covers the move under ``min(a + A t, b + A (h - t), V)``. Starting a jump at about the time it needs
+    keeps the stretching from spreading over its neighbours (it only lengthens intervals), which
+    otherwise end with idle pulses on both sides of every hole: −3 to −25 % on the hard-case clouds.
+    """
+    D = np.abs(np.diff(y, axis=0))
+    speed = D / (req.window.n_min / req.tick_hz)
+    before = np.minimum(np.vstack([speed[:1], speed[:-1]]), req.v_max)
+    after = np.minimum(np.vstack([speed[1:], speed[-1:]]), req.v_max)
+    t = np.max(tent_time_s(D, before, after, req.v_max, req.a_max), axis=1)
+    return np.ceil(t * req.tick_hz).astype(np.int64)
+
+
 @register_pulse_planner("sync")
 def plan_sync(req: PulseRequest) -> PulsePlan:
     """Plan the whole job as one spline through the points on admissible pulse instants."""
@@ -106,6 +124,7 @@ def plan_sync(req: PulseRequest) -> PulsePlan:
     d0 = np.ceil(dist / caps * f).astype(np.int64)
     approach = float(np.linalg.norm(pts[0] - req.home))
     d0[:2] = int(np.ceil(max(np.sqrt(6.0 * approach / a_min), 1.5 * approach / req.rapid_mm_s) * f / 2))
+    d0 = np.where(gap, np.maximum(d0, _jump_ticks(y_pad, req)), d0)
     d0 = np.where(gap, w.snap_up(d0)[0], np.maximum(d0, w.n_min))
     d, m, coeffs, iters, worst = solve_durations(
         np.asarray(d0),
