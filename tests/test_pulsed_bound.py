@@ -141,3 +141,33 @@ def test_hard_clouds_bound_between_plain_bound_and_sync(name):
     b = lower_bound_travel(pts, WIN, V, A)
     assert planned.lower_bound_s <= b.seconds <= planned.plan.burn_time_s
     assert b.seconds == planned.lower_bound_travel_s
+
+
+STL = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "corpus" / "stl" / "nut.stl"
+
+
+@pytest.mark.skipif(not STL.is_file(), reason="the shared corpus is absent")
+def test_mesh_cloud_points_are_inside_the_mesh():
+    """Every sampled point is inside the STL by trimesh's own test; the cloud is a serpentine raster."""
+    import trimesh
+
+    pts = clouds.mesh_cloud(STL, size_mm=8.0, seed=1)
+    mesh = trimesh.load_mesh(str(STL))
+    lo, hi = mesh.bounds
+    mesh.apply_translation(-(lo + hi) / 2)
+    mesh.apply_scale(8.0 / float(np.max(hi - lo)))
+    q = pts - np.asarray(clouds.CENTER_MM)
+    sel = np.random.default_rng(0).choice(len(q), 500, replace=False)
+    assert mesh.contains(q[sel]).all()
+    assert len(pts) > 1000 and len(np.unique(pts, axis=0)) == len(pts)
+
+
+def test_hard_clouds_have_their_difficulty():
+    """Holes and text have long jumps inside rows, short rows have few points per row, sparse gaps are long."""
+    for name, min_jump_mm in (("holes", 0.45), ("text", 0.3), ("sparse", 0.3)):
+        pts = clouds.HARD_CASES[name]()
+        step = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        assert np.mean(step > min_jump_mm) > (0.3 if name == "sparse" else 0.002), name
+    pts = clouds.HARD_CASES["short-rows"]()
+    new_row = np.abs(np.diff(pts[:, 1])) > 0.05
+    assert len(pts) / (new_row.sum() + 1) < 20

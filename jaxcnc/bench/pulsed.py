@@ -9,6 +9,11 @@ this benchmark generates one per program with the same point count: a raster-eng
 times (first to last work pulse), the lower bound (intervals × shortest allowed period) and the
 reductions, beside the documents' own figures. ``check=True`` also writes every table and
 verifies limits at every tick, every pulse interval and every hit.
+
+A second table (:func:`run_hard_cases`) runs ``sync`` on the hard-case clouds of
+:mod:`jaxcnc.io.clouds` (holes, short rows, misaligned rows, sparse, 3-D text, and points inside a
+real STL of the corpus) against the travel-aware lower bound ``LBt``
+(:mod:`jaxcnc.planners.pulsed.bound`).
 """
 
 from __future__ import annotations
@@ -23,10 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxcnc.io import clouds
 from jaxcnc.io.points import PointJob
 from jaxcnc.io.raster import superellipsoid_raster
 from jaxcnc.machine import MachineConfig, parse_machine
 from jaxcnc.planners.pulsed import plan_points
+
+#: The real mesh the hard-case table samples (skipped when the corpus is absent).
+CORPUS_STL = Path(__file__).resolve().parents[3] / "shared" / "corpus" / "stl" / "nut.stl"
 
 #: (points, old mm:ss, new mm:ss) of the documents' 14 programs.
 DOCUMENT_PROGRAMS = (
@@ -88,8 +97,13 @@ def _plan_wall_cold(n_points: int) -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
-def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False, cold: bool = True) -> list[dict]:
-    """Run the 14-program comparison (or the 1-based ``programs`` chosen); print and return the rows."""
+def run_pulsed_benchmarks(
+    programs: list[int] | None = None, check: bool = False, cold: bool = True, hard: bool = True
+) -> list[dict]:
+    """Run the 14-program comparison (or the 1-based ``programs`` chosen); print and return the rows.
+
+    ``hard``: then the hard-case table (:func:`run_hard_cases`) when all programs run.
+    """
     machine = glass_engraver()
     chosen = programs or list(range(1, len(DOCUMENT_PROGRAMS) + 1))
     print("pulsed engraving, the documents' 14 programs (40 Hz ±5 %, 300 mm/s², 1800 mm/min, 100-150 µm)")
@@ -111,6 +125,7 @@ def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False
             planned = plan_points(job, machine, name)
             res[name] = (planned, time.perf_counter() - t0)
         lb = res["sync"][0].lower_bound_s
+        lbt = res["sync"][0].lower_bound_travel_s
         sg, seed, sync = (res[k][0].plan.burn_time_s for k in ("stop-and-go", "seed", "sync"))
         row = {
             "program": i,
@@ -121,6 +136,7 @@ def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False
             "seed_s": seed,
             "sync_s": sync,
             "lower_bound_s": lb,
+            "lower_bound_travel_s": lbt,
             "sync_plan_wall_s": res["sync"][1],
             "sync_idle_pulses": res["sync"][0].plan.stats["idle_pulses"],
         }
@@ -132,7 +148,7 @@ def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False
             f"{i:>2} {n:>7} | {row['doc_old_s']:>7.0f} {row['doc_new_s']:>7.0f} {100 * doc_red:>6.1f} | "
             f"{sg:>8.1f} {1e3 * sg / n:>5.1f} {seed:>8.1f} {100 * (1 - seed / sg):>5.1f} {sync:>8.1f} "
             f"{100 * (1 - sync / sg):>5.1f} {lb:>8.1f} {sync / lb:>7.4f} {seed / lb:>7.4f} | {res['sync'][1]:>6.2f}"
-            + (f"  {row['check']}" if check else "")
+            f" | LBt {lbt:>8.1f} sync/LBt {sync / lbt:.4f}" + (f"  {row['check']}" if check else "")
         )
     red = np.array([1 - r["sync_s"] / r["stop_and_go_s"] for r in rows])
     ratio = np.array([r["sync_s"] / r["lower_bound_s"] for r in rows])
@@ -145,6 +161,52 @@ def run_pulsed_benchmarks(programs: list[int] | None = None, check: bool = False
     if cold and 4 in chosen:
         cold_s = _plan_wall_cold(n_points=108_400)
         print(f"planning program 4 (108,400 points) with sync in a fresh process, no compile cache: {cold_s:.2f} s")
+    if hard and programs is None:
+        rows += run_hard_cases(check=check)
+    return rows
+
+
+def hard_case_clouds() -> dict[str, np.ndarray]:
+    """The hard-case clouds by name, with points inside the corpus' nut (when the corpus is present)."""
+    out = {name: make() for name, make in clouds.HARD_CASES.items()}
+    if CORPUS_STL.is_file():
+        out["mesh:nut.stl"] = clouds.mesh_cloud(CORPUS_STL, size_mm=12.0, seed=6)
+    return out
+
+
+def run_hard_cases(check: bool = False) -> list[dict]:
+    """``sync`` on each hard-case cloud against both lower bounds; print and return the rows."""
+    machine = glass_engraver()
+    print("hard cases: sync against LB (intervals x shortest period) and LBt (travel-aware, certified)")
+    head = (
+        f"{'cloud':>13} {'points':>7} | {'sync s':>8} {'LB s':>8} {'LBt s':>8} {'sync/LB':>7} {'sync/LBt':>8} "
+        f"{'idle':>6} | {'plan s':>6}"
+    )
+    print(head)
+    print("-" * len(head))
+    rows = []
+    for name, pts in hard_case_clouds().items():
+        job = PointJob(pts, None, np.arange(1, len(pts) + 1), name)
+        t0 = time.perf_counter()
+        planned = plan_points(job, machine, "sync")
+        wall = time.perf_counter() - t0
+        sync, lb, lbt = planned.plan.burn_time_s, planned.lower_bound_s, planned.lower_bound_travel_s
+        row = {
+            "cloud": name,
+            "n_points": len(pts),
+            "sync_s": sync,
+            "lower_bound_s": lb,
+            "lower_bound_travel_s": lbt,
+            "sync_idle_pulses": planned.plan.stats["idle_pulses"],
+            "sync_plan_wall_s": wall,
+        }
+        if check:
+            row["check"] = _check_tables({"sync": planned}, machine)
+        rows.append(row)
+        print(
+            f"{name:>13} {len(pts):>7} | {sync:>8.1f} {lb:>8.1f} {lbt:>8.1f} {sync / lb:>7.4f} {sync / lbt:>8.4f} "
+            f"{row['sync_idle_pulses']:>6} | {wall:>6.2f}" + (f"  {row['check']}" if check else "")
+        )
     return rows
 
 

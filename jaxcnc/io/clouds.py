@@ -152,8 +152,10 @@ def text_cloud(text: str = "jaxcnc", height_mm: float = 6.0, depth_mm: float = 0
 def mesh_cloud(path: str | Path, size_mm: float = 20.0, seed: int = 0, max_points: int | None = None, **kw):
     """Points on the raster grid inside a closed mesh (an STL, read with trimesh), scaled to ``size_mm``.
 
-    The mesh is centred and scaled so its largest extent is ``size_mm``; which grid points are inside
-    is trimesh's ray test (``Trimesh.contains``). ``max_points`` keeps the first points in burn order.
+    The mesh is centred and scaled so its largest extent is ``size_mm``. Inside is decided per row: one
+    ray along +x through each row (``mesh.ray.intersects_location``), a point is inside when an odd
+    number of crossings lies before it (the even-odd rule; a closed mesh gives pairs).
+    ``max_points`` keeps the first points in burn order.
     """
     import trimesh
 
@@ -165,11 +167,15 @@ def mesh_cloud(path: str | Path, size_mm: float = 20.0, seed: int = 0, max_point
     half = (hi - lo) * scale / 2
 
     def inside(x, y, z):
-        q = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
-        ok = np.zeros(q.shape[0], bool)
-        box = np.all(np.abs(q) <= half, axis=1)
-        ok[box] = mesh.contains(q[box])
-        return ok.reshape(x.shape)
+        y0, z0 = y[:, 0], z[:, 0]  # one ray per row, from beyond the left end
+        origins = np.column_stack([np.full(y0.shape, -half[0] - 1.0), y0 + 1e-7, z0 + 1.3e-7])
+        dirs = np.tile([1.0, 0.0, 0.0], (y0.shape[0], 1))
+        hit, ray, _ = mesh.ray.intersects_location(origins, dirs, multiple_hits=True)
+        span = 4.0 * half[0] + 10.0  # rows apart on one sorted axis
+        key = np.sort(ray * span + hit[:, 0])
+        q = np.arange(x.shape[0])[:, None] * span + x
+        before = np.searchsorted(key, q) - np.searchsorted(key, np.arange(x.shape[0])[:, None] * span - span / 2)
+        return before % 2 == 1
 
     pts = grid_cloud(inside, tuple(float(h) for h in half), seed=seed, **kw)
     return pts if max_points is None else pts[:max_points]
