@@ -669,6 +669,7 @@ def plan_points_file(
         "total_time_s": plan.trajectory.total_time_s,
         "burn_time_s": plan.burn_time_s,
         "lower_bound_s": planned.lower_bound_s,
+        "lower_bound_travel_s": planned.lower_bound_travel_s,
         "stop_and_go_s": old.burn_time_s,
         "ratio_to_lower_bound": plan.burn_time_s / planned.lower_bound_s if planned.lower_bound_s > 0 else None,
         "reduction_vs_stop_and_go": 1.0 - plan.burn_time_s / old.burn_time_s if old.burn_time_s > 0 else 0.0,
