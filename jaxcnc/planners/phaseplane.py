@@ -38,6 +38,8 @@ up to there and the next starts from that node — the same plan as the whole pr
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 
@@ -68,7 +70,7 @@ def constraint_rows(
 
     Args:
         delta: ``(m,)`` interval lengths (mm); t_a, k_a, t_b, k_b: ``(m, n_axes)`` ``q'`` and ``q''`` at
-            the start and the end.
+            the start and the end, or sequences of ``n_axes`` columns ``(m,)`` (as every argument here).
         a_max: ``(m, n_axes)`` acceleration budget of each axis on each interval (mm/s²).
         cap_b: ``(m,)`` cap on ``x`` at the interval's end.
         box: optional ``(boxed (m,), t_lo, t_hi, k_lo, k_hi (m, n_axes))``: where ``boxed``, the rows
@@ -80,12 +82,15 @@ def constraint_rows(
     """
     two_d = 2.0 * delta
     gu, gx, h = [], [], []
-    for i in range(t_a.shape[1]):
-        ta, ka, tb, kb = t_a[:, i], k_a[:, i], t_b[:, i], k_b[:, i]
+    t_a, k_a, t_b, k_b, a_max = (_columns(x) for x in (t_a, k_a, t_b, k_b, a_max))
+    if box is not None:
+        box = (box[0],) + tuple(_columns(x) for x in box[1:])
+    for i in range(len(t_a)):
+        ta, ka, tb, kb = t_a[i], k_a[i], t_b[i], k_b[i]
         end_b = tb + two_d * kb
         rows = [(ta, ka), (end_b, kb), (-ta, -ka), (-end_b, -kb)]  # upper side at a, b; lower side at a, b
         if box is not None:
-            boxed, t_lo, t_hi, k_lo, k_hi = (box[0],) + tuple(x[:, i] for x in box[1:])
+            boxed, t_lo, t_hi, k_lo, k_hi = (box[0],) + tuple(x[i] for x in box[1:])
             g_up = (t_lo, t_hi, t_lo + two_d * k_hi, t_hi + two_d * k_hi)
             g_lo = (-t_lo, -t_hi, -(t_lo + two_d * k_lo), -(t_hi + two_d * k_lo))
             in_box = [
@@ -101,12 +106,17 @@ def constraint_rows(
         for u_coef, x_coef in rows:
             gu.append(u_coef)
             gx.append(x_coef)
-            h.append(a_max[:, i])
+            h.append(a_max[i])
     one = jnp.ones_like(delta)
     gu += [two_d, -two_d]
     gx += [one, -one]
     h += [cap_b, jnp.zeros_like(delta)]
     return gu, gx, h
+
+
+def _columns(a) -> list:
+    """The columns of an ``(m, n)`` array, or a sequence of ``(m,)`` columns as given."""
+    return list(a) if isinstance(a, (list, tuple)) else [a[:, i] for i in range(a.shape[1])]
 
 
 def _max4(v: tuple[jnp.ndarray, ...]) -> jnp.ndarray:
@@ -194,16 +204,32 @@ def backward_scan(
     if cap_b is None:
         cap_b = jnp.full(x_static.shape, jnp.inf)
 
-    def step(k_next, row):
-        xs, a, b, cb = row
-        k_b = jnp.minimum(k_next, cb)
-        k_a = xs
-        for aj, bj in zip(a, b, strict=True):
-            k_a = jnp.minimum(k_a, aj * k_b + bj)
-        return k_a, k_a
-
-    _, k = jax.lax.scan(step, x_end, (x_static, alpha, beta, cap_b), reverse=True)
+    _, k = jax.lax.scan(_backward_step, x_end, (x_static, alpha, beta, cap_b), reverse=True)
     return jnp.concatenate([k, x_end[None]])
+
+
+def _backward_step_exact(k_next, row):
+    """:func:`_backward_step`, also saying whether ``K_a`` is the row's ``F_j(∞)`` (see :func:`solve_window`).
+
+    Inside the step rather than after the scan: XLA would fuse a second evaluation of :func:`static_cap`
+    into an expression of the scan's inputs.
+    """
+    xs, a, b, cb = row
+    k_a, _ = _backward_step(k_next, row)
+    unbounded = xs
+    for aj, bj in zip(a, b, strict=True):
+        unbounded = jnp.minimum(unbounded, jnp.where(aj > 0, aj * cb + bj, bj))
+    return k_a, (k_a, k_a >= unbounded)
+
+
+def _backward_step(k_next, row):
+    """One backward step: ``K_a = min(x_static, min_j (α_j min(K_b, cap_b) + β_j))``."""
+    xs, a, b, cb = row
+    k_b = jnp.minimum(k_next, cb)
+    k_a = xs
+    for aj, bj in zip(a, b, strict=True):
+        k_a = jnp.minimum(k_a, aj * k_b + bj)
+    return k_a, k_a
 
 
 def forward_scan(
@@ -211,19 +237,20 @@ def forward_scan(
 ) -> jnp.ndarray:
     """``(m+1,)`` ``x`` at the nodes: from ``x_start`` (rest by default), the largest admissible ``u`` on
     each interval."""
-
-    def step(x_a, row):
-        ar, br, d, k_b = row
-        reach = jnp.inf
-        for am, bm in zip(ar, br, strict=True):
-            reach = jnp.minimum(reach, am * x_a + bm)
-        x_b = jnp.where(d > 0, reach, x_a)
-        x_b = jnp.clip(x_b, 0.0, k_b)
-        return x_b, x_b
-
     x0 = jnp.minimum(jnp.asarray(x_start, k.dtype), k[0])
-    _, x = jax.lax.scan(step, x0, (a, b, delta, k[1:]))
+    _, x = jax.lax.scan(_forward_step, x0, (a, b, delta, k[1:]))
     return jnp.concatenate([x0[None], x])
+
+
+def _forward_step(x_a, row):
+    """One forward step: ``x_b = clip(min_m (A_m x_a + B_m), 0, K_b)`` (``x_a`` kept on a point)."""
+    ar, br, d, k_b = row
+    reach = jnp.inf
+    for am, bm in zip(ar, br, strict=True):
+        reach = jnp.minimum(reach, am * x_a + bm)
+    x_b = jnp.where(d > 0, reach, x_a)
+    x_b = jnp.clip(x_b, 0.0, k_b)
+    return x_b, x_b
 
 
 def line_reach(gu: list, h: list, delta: jnp.ndarray) -> jnp.ndarray:
@@ -281,3 +308,51 @@ def solve_window(
     back = forward_pass(node_cap[::-1], jnp.concatenate([zero, reach[::-1]]))[::-1]
     x = forward_pass(back.at[0].min(x_start), jnp.concatenate([zero, reach]))
     return x, back[:-1] >= node_cap[:-1], back[0]
+
+
+def solve_chunked(
+    chunk_rows: Callable[[jnp.ndarray], dict],
+    n_chunks: int,
+    x_end: jnp.ndarray,
+    x_start: jnp.ndarray | float = 0.0,
+    tail: Callable[[dict, jnp.ndarray], dict] | None = None,
+) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray, dict]:
+    """:func:`solve_window` (curved) over ``n_chunks`` chunks of ``C`` intervals, rows built chunk by chunk.
+
+    The same passes, the same steps, the same plan: but the rows, :func:`static_cap` and the pieces of
+    each chunk are built right before its steps, so they stay in cache (on a CPU the whole-window form
+    writes and reads some sixty ``(m,)`` vectors, and that, not the steps, is what it costs).
+    ``chunk_rows(i)``: a dict with ``rows``, ``delta``, ``cap_a`` (and anything ``tail`` needs) of chunk
+    ``i`` (a traced index), each ``(C,)``; it is called once per pass, so it should be cheap elementwise
+    work. ``tail(chunk, nodes)``: per-chunk outputs ``(C,)`` from the chunk's dict and its ``C + 1``
+    node values of ``x``, gathered into ``(n_chunks · C,)`` vectors. Returns ``(x, exact, k0, tail_out)``
+    as :func:`solve_window` does, ``tail_out`` ``{}`` without ``tail``.
+    """
+
+    def back(k_next, i):
+        c = chunk_rows(i)
+        gu, gx, h = c["rows"]
+        cap_b = h[-2]
+        x_static = static_cap(gu, gx, h, c["cap_a"])
+        alpha, beta = backward_pieces(gu, gx, h, c["delta"])
+        k_first, (k, exact) = jax.lax.scan(_backward_step_exact, k_next, (x_static, alpha, beta, cap_b), reverse=True)
+        return k_first, (k, exact)
+
+    x_end = jnp.asarray(x_end, jnp.float64)
+    chunks = jnp.arange(n_chunks)
+    k0, (k, exact) = jax.lax.scan(back, x_end, chunks, reverse=True)
+    k_next = jnp.concatenate([k.reshape(-1)[1:], x_end[None]]).reshape(k.shape)  # K at each interval's end
+
+    def forward(x_a, i_k):
+        i, k_b = i_k
+        c = chunk_rows(i)
+        gu, gx, h = c["rows"]
+        a, b = forward_pieces(gu, gx, h, c["delta"])
+        x_last, x = jax.lax.scan(_forward_step, x_a, (a, b, c["delta"], k_b))
+        out = {} if tail is None else tail(c, jnp.concatenate([x_a[None], x]))
+        return x_last, (x, out)
+
+    x0 = jnp.minimum(jnp.asarray(x_start, jnp.float64), k0)
+    _, (x, out) = jax.lax.scan(forward, x0, (chunks, k_next))
+    x = jnp.concatenate([x0[None], x.reshape(-1)])
+    return x, exact.reshape(-1), k0, {name: v.reshape(-1) for name, v in out.items()}

@@ -34,7 +34,7 @@ from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
 from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, junctions
 from jaxcnc.planners.lookahead_planner import plan_lookahead
-from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve_window
+from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve_chunked, solve_window
 from jaxcnc.planners.protocol import Planner, PlanRequest
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
@@ -50,41 +50,62 @@ MAX_HOLD_CUTS = 4096
 JERK_SHARE = 0.5
 
 
-def speed_cap(t: jnp.ndarray, k: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndarray, chord_tol_mm, tick_hz):
-    """``(m,)`` cap on ``x = ṡ²`` at nodes with ``q' = t``, ``q'' = k`` ``(m, 3)``: axis speeds, feed, chord error.
+def speed_cap(t: tuple, k: tuple, v_max: tuple, feed: jnp.ndarray, chord_tol_mm, tick_hz) -> jnp.ndarray:
+    """``(m,)`` cap on ``x = ṡ²`` at nodes with ``q' = t``, ``q'' = k``: axis speeds, feed, chord error.
 
+    ``t``, ``k``: one ``(m,)`` column per axis (x, y, z); ``v_max``: per axis, each a scalar or ``(m,)``.
     The tool moves at ``|q'| ṡ``, axis ``i`` at ``|q'_i| ṡ``; the curvature is ``|q' × q''| / |q'|³``.
     """
-    comp = jnp.abs(t)
-    x_axis = jnp.min(jnp.where(comp > 0, (v_max / jnp.where(comp > 0, comp, 1.0)) ** 2, jnp.inf), axis=1)
-    speed = jnp.linalg.norm(t, axis=1)
+    x_axis = _axis_speed_cap(tuple(jnp.abs(c) for c in t), v_max)
+    speed = jnp.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
     safe = jnp.where(speed > 0, speed, 1.0)
-    kappa = jnp.linalg.norm(jnp.cross(t, k), axis=1) / safe**3
+    cross = (t[1] * k[2] - t[2] * k[1], t[2] * k[0] - t[0] * k[2], t[0] * k[1] - t[1] * k[0])
+    kappa = jnp.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2) / safe**3
     v_tool = jnp.minimum(feed, chord_speed(kappa, chord_tol_mm, tick_hz))  # the tool's own speed caps
     return jnp.minimum(x_axis, jnp.where(speed > 0, (v_tool / safe) ** 2, jnp.inf))
 
 
-def box_speed_cap(t_lo: jnp.ndarray, t_hi: jnp.ndarray, v_max: jnp.ndarray, feed: jnp.ndarray) -> jnp.ndarray:
-    """``(m,)`` cap on ``x`` from the axis speeds and the feed anywhere in a box ``t_lo ≤ q' ≤ t_hi`` ``(m, 3)``."""
-    t_abs = jnp.maximum(jnp.abs(t_lo), jnp.abs(t_hi))
-    x_axis = jnp.min(jnp.where(t_abs > 0, (v_max / jnp.where(t_abs > 0, t_abs, 1.0)) ** 2, jnp.inf), axis=1)
-    speed = jnp.linalg.norm(t_abs, axis=1)
+def _axis_speed_cap(t_abs: tuple, v_max: tuple) -> jnp.ndarray:
+    """``(m,)`` ``min_i (V_i / |q'_i|)²`` over the axes with ``q'_i ≠ 0`` (``inf`` where none moves)."""
+    x = jnp.inf
+    for c, v in zip(t_abs, v_max, strict=True):
+        x = jnp.minimum(x, jnp.where(c > 0, (v / jnp.where(c > 0, c, 1.0)) ** 2, jnp.inf))
+    return x
+
+
+def box_speed_cap(t_lo: tuple, t_hi: tuple, v_max: tuple, feed: jnp.ndarray) -> jnp.ndarray:
+    """``(m,)`` cap on ``x`` from the axis speeds and the feed anywhere in a box ``t_lo ≤ q' ≤ t_hi`` (columns)."""
+    t_abs = tuple(jnp.maximum(jnp.abs(lo), jnp.abs(hi)) for lo, hi in zip(t_lo, t_hi, strict=True))
+    x_axis = _axis_speed_cap(t_abs, v_max)
+    speed = jnp.sqrt(t_abs[0] ** 2 + t_abs[1] ** 2 + t_abs[2] ** 2)
     return jnp.minimum(x_axis, jnp.where(speed > 0, (feed / jnp.where(speed > 0, speed, 1.0)) ** 2, jnp.inf))
 
 
-def jerk_cap(k_a: jnp.ndarray, k_b: jnp.ndarray, delta: jnp.ndarray, j_max: jnp.ndarray) -> jnp.ndarray:
+def jerk_cap(k_a: tuple, k_b: tuple, delta: jnp.ndarray, j_max: jnp.ndarray) -> jnp.ndarray:
     """``(m,)`` cap on ``x = v²`` on intervals where the curvature changes, from the axes' jerk limits.
 
     At constant speed an axis on a curve has jerk ``K' ṡ³`` (``K' = dK/ds``, here the change of the
     curvature vector across the interval over its length); keeping it within ``JERK_SHARE`` of
     ``J_i`` leaves the rest for the time law's own jerk: ``x ≤ (share J_i / |K'_i|)^(2/3)``.
+    ``k_a``, ``k_b``: one ``(m,)`` column per axis; ``j_max`` ``(3,)``.
     """
-    kp = jnp.abs(k_b - k_a) / jnp.where(delta > 0, delta, 1.0)[:, None]
-    ok = (kp > 0) & jnp.isfinite(j_max)[None, :]
-    x = jnp.where(
-        ok, (JERK_SHARE * jnp.where(ok, j_max[None, :], 1.0) / jnp.where(ok, kp, 1.0)) ** (2.0 / 3.0), jnp.inf
-    )
-    return jnp.min(x, axis=1)
+    inv_d = 1.0 / jnp.where(delta > 0, delta, 1.0)
+    x = jnp.inf
+    for i, (ka, kb) in enumerate(zip(k_a, k_b, strict=True)):
+        kp = jnp.abs(kb - ka) * inv_d
+        ok = (kp > 0) & jnp.isfinite(j_max[i])
+        j = jnp.where(jnp.isfinite(j_max[i]), j_max[i], 1.0)
+        x = jnp.minimum(x, jnp.where(ok, (JERK_SHARE * j / jnp.where(ok, kp, 1.0)) ** (2.0 / 3.0), jnp.inf))
+    return x
+
+
+#: The grid's per-axis fields, passed to :func:`plan_grid` as ``(3, m)`` (one row per axis).
+_AXIS_FIELDS = ("t_a", "k_a", "t_b", "k_b", "t_lo", "t_hi", "k_lo", "k_hi")
+
+
+#: Intervals per chunk of :func:`~jaxcnc.planners.phaseplane.solve_chunked` (at most; a power of two that
+#: divides the bucket): the rows of one chunk stay in cache between their construction and their steps.
+CHUNK_INTERVALS = 2048
 
 
 @partial(jax.jit, static_argnames=("curved_any", "axes"))
@@ -101,23 +122,52 @@ def plan_grid(
 ):
     """The planner as one array program over ``m`` (padded) intervals; see the module docstring.
 
-    ``g`` holds the grid (``delta, t_a, k_a, t_b, k_b, curved, boxed`` and the box, ``feed, dwell``, the
-    holds) and what the junctions give each interval: ``at_kink`` (its span starts or ends at a kink passed
-    with a velocity step), ``is_point``, ``cap_first`` / ``cap_last`` (the junction's cap on ``x`` where the
-    interval starts / ends its span, ``inf`` inside). ``x_start``: ``x`` at the first node (0 at the program's
-    start). ``axes``: the axes whose acceleration rows can bind (finite limit, some motion): the others'
-    rows are ``0 ≤ A`` and are left out (a planar program on a three-axis machine has two thirds of the
-    rows). Returns the segments' trapezoids, ``x_node``, ``acc`` and :func:`~.phaseplane.solve_window`'s
-    ``exact`` and ``k0``.
+    ``g`` holds the grid (``delta, curved, boxed, feed, dwell`` and the holds ``(m,)``; ``t_a, k_a, t_b,
+    k_b`` and the box ``t_lo, t_hi, k_lo, k_hi`` as ``(3, m)``, one row per axis: every step is elementwise
+    over intervals, and rows of one axis are contiguous vectors) and what the junctions give each interval:
+    ``at_kink`` (its span starts or ends at a kink passed with a velocity step), ``is_point``, ``cap_first`` /
+    ``cap_last`` (the junction's cap on ``x`` where the interval starts / ends its span, ``inf`` inside).
+    ``x_start``: ``x`` at the first node (0 at the program's start). ``axes``: the axes whose acceleration
+    rows can bind (finite limit, some motion): the others' rows are ``0 ≤ A`` and are left out (a planar
+    program on a three-axis machine has two thirds of the rows). Returns the segments' trapezoids,
+    ``x_node``, ``share`` (each interval's share of the axes' acceleration, see :func:`interval_share`) and
+    :func:`~.phaseplane.solve_window`'s ``exact`` and ``k0``. With curved intervals the window is solved
+    chunk by chunk (:func:`~.phaseplane.solve_chunked`, the same plan).
     """
+    limits = (v_max, a_max, chord_tol, tick_hz, axes, j_max)
+    share = interval_share(g["at_kink"], g["curved"])
+    zero = jnp.zeros(())
+    if curved_any:
+        m = g["delta"].shape[0]
+        size = min(CHUNK_INTERVALS, m & -m)
+
+        def chunk_rows(i):
+            return _interval_rows(
+                {k: jax.lax.dynamic_slice_in_dim(v, i * size, size, v.ndim - 1) for k, v in g.items()}, *limits
+            )
+
+        x_node, exact, k0, out = solve_chunked(chunk_rows, m // size, zero, x_start, _segment_laws)
+    else:
+        c = _interval_rows(g, *limits)
+        x_node, exact, k0 = solve_window(c["rows"], c["delta"], c["cap_a"], zero, False, x_start)
+        out = _segment_laws(c, x_node)
+    out.update(x_node=x_node, share=share, exact=exact, k0=k0)
+    return out
+
+
+def _interval_rows(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max) -> dict:
+    """Each interval's caps and constraint rows (elementwise; ``g`` as :func:`plan_grid`'s, or a chunk of it):
+    ``rows``, ``delta``, ``cap_a`` for the passes, ``vcap_a``, ``vcap_b``, ``curved``, ``dwell`` for
+    :func:`_segment_laws`."""
+    col = {f: tuple(g[f][i] for i in range(3)) for f in _AXIS_FIELDS}
     curved = g["curved"]
-    share = jnp.where(g["at_kink"], 1.0 - JUNCTION_SHARE, 1.0) * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
-    acc = jnp.minimum(a_max, BIG)[None, :] * share[:, None]
-    vel = jnp.minimum(v_max, BIG)[None, :] * jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)[:, None]
-    vcap_a = speed_cap(g["t_a"], g["k_a"], vel, g["feed"], chord_tol, tick_hz)
-    vcap_b = speed_cap(g["t_b"], g["k_b"], vel, g["feed"], chord_tol, tick_hz)
+    share = interval_share(g["at_kink"], curved)
+    vel_share = jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
+    vel = tuple(jnp.minimum(v_max[i], BIG) * vel_share for i in range(3))
+    vcap_a = speed_cap(col["t_a"], col["k_a"], vel, g["feed"], chord_tol, tick_hz)
+    vcap_b = speed_cap(col["t_b"], col["k_b"], vel, g["feed"], chord_tol, tick_hz)
     # in a box the axis speeds and the feed are capped everywhere inside, not at the ends alone
-    vcap_box = box_speed_cap(g["t_lo"], g["t_hi"], vel, g["feed"])
+    vcap_box = box_speed_cap(col["t_lo"], col["t_hi"], vel, g["feed"])
     vcap_a = jnp.where(g["boxed"], jnp.minimum(vcap_a, vcap_box), vcap_a)
     vcap_b = jnp.where(g["boxed"], jnp.minimum(vcap_b, vcap_box), vcap_b)
     is_point = g["is_point"]
@@ -125,24 +175,35 @@ def plan_grid(
     cap_b = jnp.where(is_point, 0.0, jnp.minimum(vcap_b, g["cap_last"]))
     cap_a, cap_b = jnp.minimum(cap_a, g["hold_a"]), jnp.minimum(cap_b, g["hold_b"])  # requested holds (nodes)
     if j_max is not None:  # jerk limits: the curvature may change only so fast at speed
-        x_jerk = jerk_cap(g["k_a"], g["k_b"], g["delta"], j_max)
+        x_jerk = jerk_cap(col["k_a"], col["k_b"], g["delta"], j_max)
         cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
-    delta = g["delta"]
-    ax = list(axes)
-    box = (g["boxed"],) + tuple(g[f][:, ax] for f in ("t_lo", "t_hi", "k_lo", "k_hi"))
-    t_a, k_a, t_b, k_b = (g[f][:, ax] for f in ("t_a", "k_a", "t_b", "k_b"))
-    rows = constraint_rows(delta, t_a, k_a, t_b, k_b, acc[:, ax], cap_b, box)
-    x_node, exact, k0 = solve_window(rows, delta, cap_a, jnp.zeros(()), curved_any, x_start)
+    acc = [jnp.minimum(a_max[i], BIG) * share for i in axes]
+    on = {f: [col[f][i] for i in axes] for f in _AXIS_FIELDS}  # the axes whose rows can bind
+    box = (g["boxed"], on["t_lo"], on["t_hi"], on["k_lo"], on["k_hi"])
+    rows = constraint_rows(g["delta"], on["t_a"], on["k_a"], on["t_b"], on["k_b"], acc, cap_b, box)
+    return dict(rows=rows, delta=g["delta"], cap_a=cap_a, vcap_a=vcap_a, vcap_b=vcap_b, curved=curved, dwell=g["dwell"])
+
+
+def _segment_laws(c: dict, x_node: jnp.ndarray) -> dict:
+    """The segments' trapezoids from :func:`_interval_rows`' ``c`` and ``x`` at the ``(m+1,)`` nodes.
+
+    Lines: a trapezoid under the span's speed cap with the axes' tangential budget. Curved intervals:
+    ``x`` linear in ``s`` between the nodes (constant ``s̈``), as planned.
+    """
+    delta, curved = c["delta"], c["curved"]
     x0, x1 = x_node[:-1], x_node[1:]
-    # Lines: a trapezoid under the span's speed cap with the axes' tangential budget.
-    # Curved intervals: x linear in s between the nodes (constant s̈), as planned.
     two_d = 2.0 * jnp.where(delta > 0, delta, 1.0)
-    a_line = line_reach(rows[0], rows[2], delta) / two_d
-    x_cap = jnp.where(curved, jnp.maximum(x0, x1), jnp.minimum(vcap_a, vcap_b))
+    a_line = line_reach(c["rows"][0], c["rows"][2], delta) / two_d
+    x_cap = jnp.where(curved, jnp.maximum(x0, x1), jnp.minimum(c["vcap_a"], c["vcap_b"]))
     a_seg = jnp.where(curved, jnp.abs(x1 - x0) / two_d, a_line)
-    out = trapezoids(x_node, x_cap, a_seg, delta, g["dwell"])
-    out.update(x_node=x_node, acc=acc, exact=exact, k0=k0)
-    return out
+    return trapezoids(x_node, x_cap, a_seg, delta, c["dwell"])
+
+
+def interval_share(at_kink, curved):
+    """``(m,)`` the share of each axis' acceleration an interval may use: less ``JUNCTION_SHARE`` beside a kink
+    passed moving, less ``GRID_MARGIN`` on curved intervals (NumPy or JAX arrays)."""
+    xp = jnp if isinstance(at_kink, jax.Array) else np
+    return xp.where(at_kink, 1.0 - JUNCTION_SHARE, 1.0) * xp.where(curved, 1.0 - GRID_MARGIN, 1.0)
 
 
 @jax.jit
@@ -274,7 +335,8 @@ def _solve_refined(
     for _ in range(MAX_REFINE):
         grid = build_grid(req.spans, counts, arrays, first, last)
         out = _solve_grid(req, facts, grid, x_start)
-        bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], out["acc"][: len(grid)])
+        acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
+        bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc)
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
@@ -360,24 +422,23 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
     cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
     g = {
         "delta": pad_rows(grid.delta, mb, 0.0),
-        "t_a": pad_rows(grid.t_a, mb, 0.0),
-        "k_a": pad_rows(grid.k_a, mb, 0.0),
-        "t_b": pad_rows(grid.t_b, mb, 0.0),
-        "k_b": pad_rows(grid.k_b, mb, 0.0),
         "curved": pad_rows(grid.curved, mb, False),
         "boxed": pad_rows(grid.boxed, mb, False),
-        "t_lo": pad_rows(grid.t_lo, mb, 0.0),
-        "t_hi": pad_rows(grid.t_hi, mb, 0.0),
-        "k_lo": pad_rows(grid.k_lo, mb, 0.0),
-        "k_hi": pad_rows(grid.k_hi, mb, 0.0),
-        "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
-        "dwell": pad_rows(np.where(first, req.dwell_s[s], 0.0), mb, 0.0),
-        # padding intervals: points at rest after the window
-        "at_kink": pad_rows(facts.at_kink[s], mb, False),
-        "is_point": pad_rows(facts.is_point[s], mb, True),
-        "cap_first": pad_rows(cap_first, mb, 0.0),
-        "cap_last": pad_rows(np.where(last, facts.cap_end[s], np.inf), mb, 0.0),
     }
+    for f in _AXIS_FIELDS:  # (3, mb): one row per axis
+        g[f] = np.zeros((3, mb))
+        g[f][:, :m] = getattr(grid, f).T
+    g.update(
+        {
+            "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
+            "dwell": pad_rows(np.where(first, req.dwell_s[s], 0.0), mb, 0.0),
+            # padding intervals: points at rest after the window
+            "at_kink": pad_rows(facts.at_kink[s], mb, False),
+            "is_point": pad_rows(facts.is_point[s], mb, True),
+            "cap_first": pad_rows(cap_first, mb, 0.0),
+            "cap_last": pad_rows(np.where(last, facts.cap_end[s], np.inf), mb, 0.0),
+        }
+    )
     hold_a, hold_b = node_holds(req, grid)
     g["hold_a"], g["hold_b"] = pad_rows(hold_a, mb, np.inf), pad_rows(hold_b, mb, np.inf)
     j_max = req.j_max
