@@ -55,6 +55,7 @@ rss_before = rss()[0]
 t0 = time.perf_counter(); job = plan_job(prog, machine); first = time.perf_counter() - t0
 walls, cpus = [], []
 for _ in range(repeats):
+    job = None  # one plan at a time: the peak is one plan_job's
     c0, t0 = time.process_time(), time.perf_counter()
     job = plan_job(prog, machine)
     walls.append(time.perf_counter() - t0); cpus.append(time.process_time() - c0)

@@ -356,14 +356,29 @@ def _segments(out: dict[str, np.ndarray], grid: Grid, commit: int) -> dict[str, 
 
 
 def _plan_of(pieces: list[dict[str, np.ndarray]], tick_hz: float) -> Plan:
-    """One :class:`Plan` of the windows' segments: aligned to ticks over the whole program."""
-    seg = {k: np.concatenate([p.pop(k) for p in pieces]) for k in list(pieces[0])}  # each window's freed at once
-    n = seg["length"].shape[0]
+    """One :class:`Plan` of the windows' segments: aligned to ticks over the whole program.
+
+    Each key's pieces are copied once, straight into an array padded to the bucket (each window's freed as
+    it is copied); the plan keeps views of the first ``n`` rows.
+    """
+    n = sum(p["length"].shape[0] for p in pieces)
     mb = bucket_size(n)
-    prof = {k: pad_rows(seg[k], mb, 0.0) for k in _SEGMENT_KEYS}
-    out = jax.device_get(_align(prof, pad_rows(seg["rest"], mb, True), tick_hz))
-    out.update({k: seg[k] for k in _SEGMENT_KEYS})
-    return plan_from_outputs(out, seg["length"], seg["span"], seg["s_start"], tick_hz)
+
+    def joined(key: str, fill, rows: int) -> np.ndarray:
+        a = np.empty(rows, dtype=pieces[0][key].dtype)
+        at = 0
+        for p in pieces:
+            v = p.pop(key)
+            a[at : at + v.shape[0]] = v
+            at += v.shape[0]
+        a[n:] = fill
+        return a
+
+    prof = {k: joined(k, 0.0, mb) for k in _SEGMENT_KEYS}
+    out = jax.device_get(_align(prof, joined("rest", True, mb), tick_hz))
+    out.update({k: prof[k][:n] for k in _SEGMENT_KEYS})
+    length, span, s_start = (joined(k, 0, n) for k in ("length", "span", "s_start"))
+    return plan_from_outputs(out, length, span, s_start, tick_hz)
 
 
 def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
