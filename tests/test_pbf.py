@@ -265,6 +265,7 @@ def test_build_resumes_and_never_trusts_a_damaged_file(tmp_path):
     out = tmp_path / "b"
     first = build(part, p, out, workers=0, pictures=1)
     assert (first.layers, first.computed, first.skipped) == (12, 12, 0)
+    whole_cli = (out / "build.cli").read_bytes()  # every layer's CLI bytes encoded where it was computed
     assert verify_build(out) == []
     man = json.loads((out / "manifest.json").read_text())
     assert man["complete"] and man["time_estimate_s"] > 12 * p.scanner.recoat_s
@@ -280,6 +281,8 @@ def test_build_resumes_and_never_trusts_a_damaged_file(tmp_path):
     third = build(part, p, out, workers=0, pictures=0)
     assert (third.computed, third.skipped) == (2, 10)
     assert (out / "layers" / "L000005.npy").read_bytes() == good
+    # ten layers' CLI bytes re-encoded from their files, two from this run's workers: the same export
+    assert (out / "build.cli").read_bytes() == whole_cli
     assert verify_build(out) == []
     assert not list((out / "layers").glob(".*"))
     # another part in the same folder is refused

@@ -77,15 +77,27 @@ def npy_bytes(a: np.ndarray) -> bytes:
 
 
 def run_chunk(
-    vertices: np.ndarray, faces: np.ndarray, z_all_mm: np.ndarray, layers: list[int], params: BuildParams, out: str
-) -> list[dict]:
-    """Compute and write the layers ``layers``; return their manifest records. Runs on a worker or here."""
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    z_all_mm: np.ndarray,
+    layers: list[int],
+    params: BuildParams,
+    out: str,
+    cli: str = "none",
+) -> tuple[list[dict], dict[int, bytes]]:
+    """Compute and write the layers ``layers``; return their manifest records and, unless ``cli`` is ``"none"``,
+    each layer's bytes of the CLI export (``"binary"`` or ``"ascii"``; the driver only joins them, so the export's
+    work is spread over the workers too). Runs on a worker or here."""
+    from jaxcnc.pbf.cli_format import CLILayer, encode_layer, layer_blocks
     from jaxcnc.pbf.layer import process_chunk
     from jaxcnc.pbf.order import layer_time_s
 
     folder = Path(out) / LAYER_DIR
-    records = []
+    records, parts = [], {}
     for scan in process_chunk(vertices, faces, z_all_mm, layers, params):
+        if cli != "none":
+            layer = CLILayer(scan.z_mm, layer_blocks(scan.vectors))
+            parts[scan.index] = encode_layer(layer, params.cli_units_mm, cli == "binary")
         data = npy_bytes(scan.vectors)
         name = layer_name(scan.index)
         atomic_write(folder / name, data)
@@ -103,7 +115,7 @@ def run_chunk(
                 zone_area_mm2=scan.zone_area_mm2,
             )
         )
-    return records
+    return records, parts
 
 
 @dataclass
@@ -171,20 +183,35 @@ def _previous(out: Path, key: dict) -> dict[int, dict]:
     return keep
 
 
-def assemble_cli(out: Path, manifest: dict, binary: bool, units_mm: float, bounds_mm: np.ndarray) -> Path:
-    """Write ``build.cli`` from the layer files (in layer order), checking each file's checksum first."""
-    from jaxcnc.pbf.cli_format import CLIData, CLILayer, layer_blocks, write_cli, zone_labels
+def assemble_cli(
+    out: Path,
+    manifest: dict,
+    binary: bool,
+    units_mm: float,
+    bounds_mm: np.ndarray,
+    parts: dict[int, bytes] | None = None,
+) -> Path:
+    """Write ``build.cli`` in layer order from each layer's encoded bytes (``parts``, from the workers that
+    computed the layers) or, for a layer computed by an earlier run, from its layer file (its checksum checked
+    first)."""
+    from jaxcnc.pbf.cli_format import CLIData, CLILayer, encode_layer, layer_blocks, write_cli, zone_labels
 
+    parts = parts or {}
     data = CLIData(units_mm=units_mm, binary=binary, labels=zone_labels())
     data.dimension_mm = tuple(float(x) for x in np.concatenate([bounds_mm[0], bounds_mm[1]]))
+    encoded = []
     for rec in manifest["layers"]:
-        raw = (out / rec["file"]).read_bytes()
-        if sha256_bytes(raw) != rec["sha256"]:
-            raise BuildError(f"{out / rec['file']}: checksum differs from the manifest's; build again")
-        vec = np.load(io.BytesIO(raw), allow_pickle=False)
-        data.layers.append(CLILayer(rec["z_mm"], layer_blocks(vec)))
+        part = parts.get(int(rec["index"]))
+        if part is None:
+            raw = (out / rec["file"]).read_bytes()
+            if sha256_bytes(raw) != rec["sha256"]:
+                raise BuildError(f"{out / rec['file']}: checksum differs from the manifest's; build again")
+            vec = np.load(io.BytesIO(raw), allow_pickle=False)
+            part = encode_layer(CLILayer(rec["z_mm"], layer_blocks(vec)), units_mm, binary)
+        data.layers.append(CLILayer(rec["z_mm"], []))  # counted in the header; the bytes are the part's
+        encoded.append(part)
     path = out / "build.cli"
-    write_cli(path, data)
+    write_cli(path, data, encoded)
     return path
 
 
@@ -250,8 +277,12 @@ def build(
         progress(n_done, total)
     last_write = time.monotonic()
 
-    def record(recs: list[dict]) -> None:
+    cli_parts: dict[int, bytes] = {}
+
+    def record(result: tuple[list[dict], dict[int, bytes]]) -> None:
         nonlocal n_done, last_write
+        recs, parts = result
+        cli_parts.update(parts)
         for r in recs:
             manifest["layers"][r["index"]] = r
         n_done += len(recs)
@@ -264,11 +295,11 @@ def build(
     jobs = chunks_of(todo, max(1, chunk))
     if workers == 0 and scheduler is None:
         for job in jobs:
-            record(run_chunk(mesh.vertices, mesh.faces, z_all, job, params, str(out)))
+            record(run_chunk(mesh.vertices, mesh.faces, z_all, job, params, str(out), cli))
     elif jobs:
         from jaxcnc.pbf.distributed import run_on_dask
 
-        run_on_dask(mesh.vertices, mesh.faces, z_all, jobs, params, str(out), record, workers, scheduler)
+        run_on_dask(mesh.vertices, mesh.faces, z_all, jobs, params, str(out), record, workers, scheduler, cli)
     complete = all(k in manifest["layers"] for k in range(len(z_all)))
     manifest["complete"] = complete
     recs = sorted(manifest["layers"].values(), key=lambda r: r["index"])
@@ -278,7 +309,7 @@ def build(
     cli_path = None
     if complete and cli != "none":
         cli_path = assemble_cli(out, dict(manifest, layers=recs), cli == "binary", params.cli_units_mm,
-                                mesh.bounds_mm)  # fmt: skip
+                                mesh.bounds_mm, cli_parts)  # fmt: skip
         manifest["cli"] = dict(file=cli_path.name, sha256=sha256_file(cli_path), binary=cli == "binary")
     write_manifest(out, manifest)
     pics = []

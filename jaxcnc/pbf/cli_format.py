@@ -115,32 +115,41 @@ def header_text(data: CLIData) -> str:
     return "\n".join(lines) + "\n$$HEADEREND"
 
 
-def encode(data: CLIData) -> bytes:
-    """The bytes of a CLI file (ASCII or binary per ``data.binary``)."""
-    u = data.units_mm
-    head = header_text(data).encode("ascii")
-    if data.binary:
-        parts = [head]
-        for layer in data.layers:
-            parts.append(struct.pack("<Hf", CMD_LAYER_LONG, layer.z_mm / u))
-            for b in layer.blocks:
-                if isinstance(b, Polyline):
-                    parts.append(struct.pack("<Hiii", CMD_POLY_LONG, b.id, b.dir, len(b.points_mm)))
-                    parts.append((np.asarray(b.points_mm, dtype=np.float64) / u).astype("<f4").tobytes())
-                else:
-                    parts.append(struct.pack("<Hii", CMD_HATCH_LONG, b.id, len(b.segments_mm)))
-                    parts.append((np.asarray(b.segments_mm, dtype=np.float64) / u).astype("<f4").tobytes())
-        return b"".join(parts)
-    out = [header_text(data), "\n$$GEOMETRYSTART\n"]
-    for layer in data.layers:
-        out.append(f"$$LAYER/{layer.z_mm / u:.6f}\n")
+def encode_layer(layer: CLILayer, units_mm: float, binary: bool) -> bytes:
+    """The bytes of one layer of a CLI file (its layer command and blocks), ASCII or binary: a CLI file is its
+    header and its layers' bytes in order, so layers are encoded where they are computed (:func:`encode_parts`)."""
+    u = units_mm
+    if binary:
+        parts = [struct.pack("<Hf", CMD_LAYER_LONG, layer.z_mm / u)]
         for b in layer.blocks:
             if isinstance(b, Polyline):
-                out.append(f"$$POLYLINE/{b.id},{b.dir},{len(b.points_mm)},{_fmt(b.points_mm / u)}\n")
+                parts.append(struct.pack("<Hiii", CMD_POLY_LONG, b.id, b.dir, len(b.points_mm)))
+                parts.append((np.asarray(b.points_mm, dtype=np.float64) / u).astype("<f4").tobytes())
             else:
-                out.append(f"$$HATCHES/{b.id},{len(b.segments_mm)},{_fmt(b.segments_mm / u)}\n")
-    out.append("$$GEOMETRYEND\n")
+                parts.append(struct.pack("<Hii", CMD_HATCH_LONG, b.id, len(b.segments_mm)))
+                parts.append((np.asarray(b.segments_mm, dtype=np.float64) / u).astype("<f4").tobytes())
+        return b"".join(parts)
+    out = [f"$$LAYER/{layer.z_mm / u:.6f}\n"]
+    for b in layer.blocks:
+        if isinstance(b, Polyline):
+            out.append(f"$$POLYLINE/{b.id},{b.dir},{len(b.points_mm)},{_fmt(b.points_mm / u)}\n")
+        else:
+            out.append(f"$$HATCHES/{b.id},{len(b.segments_mm)},{_fmt(b.segments_mm / u)}\n")
     return "".join(out).encode("ascii")
+
+
+def encode_parts(data: CLIData, layer_parts: list[bytes]) -> bytes:
+    """The bytes of a CLI file from its header values (``data``; ``data.layers`` only counted) and each layer's
+    :func:`encode_layer` bytes in layer order."""
+    head = header_text(data).encode("ascii")
+    if data.binary:
+        return b"".join([head, *layer_parts])
+    return b"".join([head, b"\n$$GEOMETRYSTART\n", *layer_parts, b"$$GEOMETRYEND\n"])
+
+
+def encode(data: CLIData) -> bytes:
+    """The bytes of a CLI file (ASCII or binary per ``data.binary``)."""
+    return encode_parts(data, [encode_layer(layer, data.units_mm, data.binary) for layer in data.layers])
 
 
 def zone_labels() -> dict[int, str]:
@@ -148,13 +157,14 @@ def zone_labels() -> dict[int, str]:
     return {i + 1: name for i, name in enumerate(ZONES)}
 
 
-def write_cli(path: str | Path, data: CLIData) -> None:
-    """Write ``data`` to ``path`` (through a temporary name, renamed when complete)."""
+def write_cli(path: str | Path, data: CLIData, layer_parts: list[bytes] | None = None) -> None:
+    """Write ``data`` to ``path`` (through a temporary name, renamed when complete); ``layer_parts``: the layers'
+    bytes already encoded (:func:`encode_layer`), in place of ``data.layers``' blocks."""
     import os
 
     p = Path(path)
     tmp = p.with_name(f".{p.name}.tmp-{os.getpid()}")
-    tmp.write_bytes(encode(data))
+    tmp.write_bytes(encode(data) if layer_parts is None else encode_parts(data, layer_parts))
     os.replace(tmp, p)
 
 

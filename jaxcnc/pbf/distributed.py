@@ -38,11 +38,13 @@ def run_on_dask(
     jobs: list[list[int]],
     params: BuildParams,
     out: str,
-    record: Callable[[list[dict]], None],
+    record: Callable[[tuple[list[dict], dict[int, bytes]]], None],
     workers: int | None = None,
     scheduler: str | None = None,
+    cli: str = "none",
 ) -> None:
-    """Run :func:`jaxcnc.pbf.build.run_chunk` for every job; call ``record`` with each job's records as it ends."""
+    """Run :func:`jaxcnc.pbf.build.run_chunk` for every job; call ``record`` with each job's result (its records
+    and its layers' CLI bytes) as it ends."""
     from dask.distributed import Client, as_completed
 
     from jaxcnc.pbf.build import run_chunk
@@ -57,7 +59,7 @@ def run_on_dask(
         run = uuid.uuid4().hex[:8]
         v, f, z = client.scatter([vertices, faces, z_all_mm], broadcast=True)
         futures = [
-            client.submit(run_chunk, v, f, z, job, params, out, key=f"pbf-layers-{job[0]}-{job[-1]}-{run}")
+            client.submit(run_chunk, v, f, z, job, params, out, cli, key=f"pbf-layers-{job[0]}-{job[-1]}-{run}")
             for job in jobs
         ]
         for fut in as_completed(futures):
