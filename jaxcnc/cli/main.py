@@ -608,7 +608,8 @@ def _duration(text: str) -> float:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="jaxcnc",
-        description="Plan laser-machine motion ahead of time: G-code in, a verified tick table out.",
+        description="Plan laser-machine motion ahead of time: a job in (G-code, a DXF/HP-GL drawing, a raster image, "
+        "points for pulsed engraving; an STL part for powder bed), a verified tick table out.",
         epilog="Start with 'jaxcnc demo'. Exit status: 0 ok, 1 limits violated / check failed, 2 bad input. "
         "'play' needs NumPy alone; plan, plot, demo and bench need the planning extra: pip install 'jaxcnc[plan]'.",
     )
@@ -617,10 +618,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser(
         "plan",
-        help="plan a program into a tick table",
+        help="plan a job (G-code, drawing, image, points) into a tick table",
         description="Parse INPUT, plan its motion on the machine and write the tick table. "
-        "INPUT by extension: .ngc .nc .gcode .tap (G-code), .xyz .csv (points for pulsed engraving: one "
-        "'x y z [energy]' per line). On a machine with [laser] mode = \"pulsed\" every point (or every G1 end "
+        "INPUT by extension: .ngc .nc .gcode .tap .g .cnc (G-code), .dxf (drawing), .plt .hpgl (HP-GL), .png .bmp "
+        ".tif .tiff (raster image), .xyz .csv (points for pulsed engraving: one 'x y z [energy]' per line), or a "
+        'plug-in\'s suffix. On a machine with [laser] mode = "pulsed" every point (or every G1 end '
         "point) is burned by one pulse, the motion passing through it at the pulse.",
     )
     sp.add_argument("input", help="the job: a G-code program or a point file")
@@ -842,8 +844,10 @@ def build_parser() -> argparse.ArgumentParser:
         "and the TCP receiver. planners: topp beside CasADi and toppra on the butterfly. pulsed: the documents' "
         "14 engraving programs. vibration: no shaping, each input shaper and speed-band avoidance on cornered "
         "parts with a 40 Hz mode (job time, residual vibration, contour error, planning time). scanner: galvo vector "
-        "list compilation (vectors/s) and emulation at the 10 us tick (ticks/s) against real time. Every run prints "
-        "the date, the commit and the load average; JIT compile time "
+        "list compilation (vectors/s) and emulation at the 10 us tick (ticks/s) against real time. pbf: slicing and "
+        "hatching against PySLM, Dask scaling. split: stage + scanner split against the stage alone and the "
+        "documents' method. raster: an image planned natively against the same path as per-pixel G-code. Every run "
+        "prints the date, the commit and the load average; JIT compile time "
         "is reported apart. A missing input is an error (exit 2), never replaced by another.",
     )
     sp.add_argument(
