@@ -349,6 +349,12 @@ def plan_file(
         )
     if reorder:
         raise JaxcncError("--reorder applies to point-by-point jobs (point files or pulsed machines)")
+    if machine.galvo is not None and machine.galvo.stage:
+        if split not in (None, "none") or kinematics or split_plot:
+            raise JaxcncError("a stage + galvo machine ([galvo] axes) runs M170/M171 sections, not a split")
+        return plan_external_file(
+            input_path, machine, out, planner, progress, dialect, bounds=bounds, input_options=input_options
+        )
     if split not in (None, "none"):
         if machine.scanner is None:
             raise JaxcncError(f"--split {split}: machine {machine.name!r} has no [scanner] section")
@@ -433,6 +439,65 @@ def plan_split_file(
         "field_use": chk.max_field_use,
         "split_stats": {k: v for k, v in plan.stats.items() if not isinstance(v, dict)},
         "seed_figures": plan.stats.get("seed"),
+        "limits": limits(machine),
+        "violations": [str(v) for v in meas.violations] + chk.violations,
+    }
+
+
+def plan_external_file(
+    input_path: str | Path,
+    machine: MachineConfig,
+    out: str | Path,
+    planner: str | None = None,
+    progress: bool | None = None,
+    dialect: str | None = None,
+    bounds: JobBounds = DEFAULT_BOUNDS,
+    input_options: Mapping[str, Any] | None = None,
+) -> dict:
+    """Plan a program on a stage + galvo machine: stage and scanner sections switched by M170 / M171 (the
+    external motion module, :mod:`jaxcnc.ticks.external`); write the joined table and verify it (every axis'
+    limits, the tool point, the stage at rest while the scanner runs)."""
+    from jaxcnc.jaxconfig import configure_jax
+
+    configure_jax()
+    from jaxcnc.format import TableFile
+    from jaxcnc.ticks.external import check_external, plan_external, write_external_table
+    from jaxcnc.ticks.verify import measure_table
+
+    st = Stages(progress, f"planning {Path(input_path).name}")
+    options = source_options(dialect, input_options)
+    try:
+        with st.stage("parse"):
+            program = load_program(input_path, machine, input_options=options)
+            check_program_bounds(program, machine, bounds)
+        with st.stage("plan"):
+            plan = plan_external(program, machine, planner)
+            check_planned_bounds(str(input_path), plan.n_ticks, plan.total_time_s, machine, bounds)
+        with st.stage("ticks"):
+            write_external_table(plan, program, machine, out, source_options=options)
+        with st.stage("verify"):
+            table = TableFile(out)
+            meas = measure_table(table, machine)
+            chk = check_external(table, machine, program)
+    finally:
+        st.close()
+    t = st.seconds
+    return {
+        "input": str(input_path),
+        "machine": machine.name,
+        "table": str(out),
+        "planner": "external",
+        "total_time_s": plan.total_time_s,
+        "n_blocks": program.n_blocks,
+        "n_ticks": plan.n_ticks,
+        "tick_hz": machine.tick_hz,
+        "path_length_mm": plan.path_length_mm,
+        "sections": [[int(s.scanner), s.first_tick, s.last_tick] for s in plan.sections],
+        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
+        "timings_s": dict(t),
+        **measured(meas),
+        "max_path_deviation_mm": chk.max_tool_deviation_mm,
+        "path_tolerance_mm": machine.path.corner_tol_mm + table.header.discrete_mm,
         "limits": limits(machine),
         "violations": [str(v) for v in meas.violations] + chk.violations,
     }
@@ -732,6 +797,15 @@ def check_table(
             f"(allowed one discrete), scanner at most {100 * chk.max_field_use:.1f} % of its field"
         )
         meas.violations.extend(chk.violations)
+    elif prog is not None and table.header.meta.get("external") and machine.galvo is not None:
+        from jaxcnc.ticks.external import check_external  # stage + galvo: the tool point is stage + beam
+
+        ext = check_external(table, machine, prog)
+        meas.path_note = (
+            f"stage + galvo: tool point within {ext.max_tool_deviation_mm:.3g} mm of the program at every tick, "
+            f"stage still while the scanner runs (moved {ext.max_stage_motion_in_scanner_mm:.3g} mm)"
+        )
+        meas.violations.extend(ext.violations)
     elif prog is not None:
         meas.path = path_deviation(table, machine, prog)
         meas.violations.extend(meas.path.violations)

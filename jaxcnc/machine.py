@@ -114,6 +114,15 @@ class GalvoConfig:
     tracking_error_s: float
     mirror_a_max_mm_s2: float
     damping: float = 1.0
+    #: ``axes = ["u", "v"]``: a stage + galvo machine (the external motion module, ``docs/scanner.md``): x, y (z)
+    #: are the stage, these two the beam's offset in the field (their ``[axes.*]`` limits, min/max the field,
+    #: home 0 its centre); a G-code program switches between the two with M170 / M171. Empty: scanner-only.
+    axes: tuple[str, ...] = ()
+
+    @property
+    def stage(self) -> bool:
+        """The machine has a stage beside the galvo head (``axes`` given)."""
+        return bool(self.axes)
 
 
 @dataclass(frozen=True)
@@ -306,6 +315,7 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "tracking_error_s": ("number", True, None, _tracking_error),
         "mirror_a_max_mm_s2": ("number", True, None, _mirror_accel),
         "damping": ("number", False, 1.0, _damping),
+        "axes": ("string_list", False, (), None),
     },
 }
 _TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner", "galvo")
@@ -409,6 +419,22 @@ class _Loader:
                 raise self.fail(table, "mode_zeta", f"{z!r}: a damping ratio must lie in [0, 1) (an oscillating mode)")
         return tuple(zip(f_hz, zeta, strict=True))
 
+    def galvo_axes(self, names: tuple[str, ...], axes: list[AxisConfig]) -> None:
+        """``[galvo] axes`` of a stage + galvo machine: two beam axes with their tables, centred on home 0; every
+        other axis a stage axis (x, y, z)."""
+        have = {a.name: a for a in axes}
+        if len(names) != 2 or len(set(names)) != 2:
+            raise self.fail("galvo", "axes", f"{list(names)}: names the two beam axes of the field, e.g. ['u', 'v']")
+        for n in names:
+            if n in GALVO_AXES:
+                raise self.fail("galvo", "axes", f"{n!r} is a stage axis; the beam axes are others, e.g. u, v")
+            if n not in have:
+                raise self.fail("galvo", "axes", f"beam axis {n!r} has no [axes.{n}] table")
+            if have[n].home != 0.0 or not have[n].min < 0.0 < have[n].max:
+                raise self.fail(f"axes.{n}", "home", "a beam axis spans its field around home 0 (its centre)")
+        if extra := [a for a in have if a not in names and a not in GALVO_AXES]:
+            raise self.fail(f"axes.{extra[0]}", None, f"a stage + galvo machine's stage moves x, y, z, not {extra[0]}")
+
     def load(self, doc: Mapping[str, Any]) -> MachineConfig:
         for key in doc:
             if key not in _TOP_LEVEL:
@@ -489,7 +515,9 @@ class _Loader:
                     "galvo", None, "[galvo] declares a scanner-only machine (x, y are the beam); a stage + scanner "
                     "split ([scanner]) has no scan-head model yet: remove one of the two tables"
                 )  # fmt: skip
-            if extra := [a.name for a in axes if a.name not in GALVO_AXES]:
+            if g["axes"]:
+                self.galvo_axes(g["axes"], axes)
+            elif extra := [a.name for a in axes if a.name not in GALVO_AXES]:
                 raise self.fail(
                     f"axes.{extra[0]}", None, f"a galvo machine drives x, y (the beam) and z (focus), not {extra[0]}"
                 )

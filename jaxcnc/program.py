@@ -58,6 +58,7 @@ class Event(IntEnum):
     TOOL_CHANGE = 3  # M6: change to tool ``event_value``
     PROGRAM_END = 4  # M2 / M30
     COOLANT = 5  # M7 / M8 / M9 (assist gas on a laser): ``event_value`` is 7, 8 or 9
+    EXTERNAL = 6  # M170 / M171: motion goes to the galvo scanner (``event_value`` 1) or back to the stage (0)
 
 
 class LaserMode(IntEnum):

@@ -111,7 +111,9 @@ _G_GROUP = {
     980: 10,  # G98 / G99 canned-cycle return level
     990: 10,
 }
-_M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8}
+_M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8, 170: 16, 171: 16}
+#: The external motion module (docs/scanner.md): M170 hands motion to the galvo scanner, M171 back to the stage.
+EXTERNAL_ON, EXTERNAL_OFF = 170, 171
 _CYCLE = "canned cycles are not supported: have the post write the cycle out as G0/G1 moves"
 _LATHE_CYCLE = "lathe cycles are not supported"
 _SPINDLE = "needs a spindle encoder, which a laser machine lacks"
@@ -317,8 +319,12 @@ class _Block:
 
 
 class _Interpreter:
-    def __init__(self, file: str, start: np.ndarray, home: np.ndarray, dialect: Dialect = LINUXCNC):
+    def __init__(
+        self, file: str, start: np.ndarray, home: np.ndarray, dialect: Dialect = LINUXCNC, external: bool = False
+    ):
         self.file, self.dialect = file, dialect
+        self.external = external  # M170/M171 have a meaning: the machine has a stage and a galvo head
+        self.external_at: tuple[np.ndarray, int] | None = None  # the stage's position and the M170 line, inside
         self.address = {meaning: name for name, meaning in dialect.addresses.items()}
         self.home = np.asarray(home, dtype=np.float64)
         self.s = _State(pos=np.asarray(start, dtype=np.float64).copy(), arc_absolute=dialect.arc_centers_absolute)
@@ -396,6 +402,9 @@ class _Interpreter:
             if b.has_m(code) is not None and s.laser != mode:
                 s.laser = mode
                 s.pending_stop = True
+        for code in (EXTERNAL_ON, EXTERNAL_OFF):
+            if (w := b.has_m(code)) is not None:
+                self.external_switch(b, w, code == EXTERNAL_ON)
         # G4 dwell
         if (g4 := b.has_g(40)) is not None:
             p = b.take("P")
@@ -501,6 +510,30 @@ class _Interpreter:
                 if ev == Event.PROGRAM_END:
                     self.ended = True
         b.check_all_used()
+
+    def external_switch(self, b: _Block, w: Word, enter: bool) -> None:
+        """M170: motion goes to the galvo scanner (the stage waits where it is; the program's X Y Z stay the tool
+        point, the beam starts at the field's centre); M171: back to the stage, the beam returning (dark) to
+        the field's centre, so the program continues from where the stage waited. A row EXTERNAL marks each."""
+        s = self.s
+        if not self.external:
+            raise b.error(
+                w, f"M{w.text} switches motion to a galvo scanner (the external motion module): only on a machine "
+                "with a stage and a [galvo] head with beam axes (docs/scanner.md)",
+            )  # fmt: skip
+        if b.axis_words() or b.has_g(0) or b.has_g(10) or b.has_g(20) or b.has_g(30):
+            raise b.error(w, f"M{w.text} stands in a block without motion (the switch happens at rest)")
+        if enter and self.external_at is not None:
+            raise b.error(w, f"M170: motion is on the scanner already (since line {self.external_at[1]})")
+        if not enter and self.external_at is None:
+            raise b.error(w, "M171 without M170: motion is on the stage")
+        if enter:
+            self.external_at = (s.pos.copy(), b.line)
+        else:
+            if not np.array_equal(s.pos, self.external_at[0]):
+                self.emit(Kind.LINE, b.line, self.external_at[0], rapid=True)  # the beam back to the centre
+            self.external_at = None
+        self.emit(Kind.EVENT, b.line, event=Event.EXTERNAL, event_value=int(enter))
 
     def move(self, b: _Block, axes: dict[int, Word], motion_word: Word | None) -> None:
         """The block's G92.1-G92.3, then what moves: G53, G5.3, a spline point, G28, a line or an arc."""
@@ -945,6 +978,8 @@ class _Interpreter:
 
     def close(self, b: _Block | None) -> None:
         """End of the program text: a BSPLINE ends here; nothing else may be left open."""
+        if self.external_at is not None:
+            raise SourceError(self.file, self.external_at[1], 0, "M170 hands motion to the scanner; no M171 follows")
         nb = self.s.nurbs
         if nb is not None and nb.kind == "BSPLINE":
             self.finish_nurbs(b)
@@ -1034,6 +1069,7 @@ def parse_gcode(
     max_lines: int = MAX_LINES,
     dialect: str | Dialect | None = None,
     fast: bool = True,
+    external: bool = False,
 ) -> Program:
     """Interpret G-code ``text`` into a Program.
 
@@ -1053,13 +1089,14 @@ def parse_gcode(
         dialect: ``"linuxcnc"`` (default), ``"siemens"``, ``"fanuc"``, a dialect TOML file or a
             :class:`~jaxcnc.gcode.dialect.Dialect`.
         fast: use the bulk path for plain blocks (``False``: every block line by line, the reference).
+        external: M170 / M171 switch motion to a galvo scanner and back (a stage + galvo machine); else errors.
 
     Raises:
         SourceError: naming ``file:line:column``, the word and the reason.
     """
     dia = load_dialect(dialect)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
-    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia)
+    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia, external)
     open_percent: list[int] = []  # the line of a '%' that opens the program when no second '%' closes it
     if _needs_preprocessor(text):
         expanded = expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia, percent=open_percent)
