@@ -82,6 +82,15 @@ class LaserConfig:
     #: feed), linear between; ``None``: power fraction = speed fraction (docs/laser.md).
     m4_curve_speed: tuple[float, ...] | None = None
     m4_curve_power: tuple[float, ...] | None = None
+    #: Laser latency: the source starts firing ``on_delay_s`` after it is commanded on (and follows level
+    #: changes that late) and stops ``off_delay_s`` after it is commanded off; the tick writer commands it that
+    #: much earlier so the burn starts and ends where the program says (docs/laser.md).
+    on_delay_s: float = 0.0
+    off_delay_s: float = 0.0
+
+    def delay_ticks(self, tick_hz: float) -> tuple[int, int]:
+        """``(on, off)`` delays in whole ticks at ``tick_hz`` (rounded to the nearest tick)."""
+        return round(self.on_delay_s * tick_hz), round(self.off_delay_s * tick_hz)
 
 
 @dataclass(frozen=True)
@@ -221,6 +230,12 @@ def _fraction(v: float) -> str | None:
     return None if 0 <= v < 1 else "must be a fraction in [0, 1)"
 
 
+def _delay(v: float) -> str | None:
+    if not (math.isfinite(v) and v >= 0):
+        return "must be zero or a positive finite number of seconds"
+    return None if v <= 0.1 else f"{v:g} s is longer than any laser's switching delay (0.1 s); was it given in ms?"
+
+
 def _m4_curve(speed: tuple[float, ...] | None, power: tuple[float, ...] | None) -> tuple[str, str] | None:
     """``(key, why)`` when the M4 curve is malformed: both lists or neither, equal lengths >= 2, speeds
     rising strictly from 0 to 1, powers in [0, 1]."""
@@ -303,6 +318,8 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "m4_floor": ("number", False, 0.0, _fraction),
         "m4_curve_speed": ("number_list", False, None, None),
         "m4_curve_power": ("number_list", False, None, None),
+        "on_delay_s": ("number", False, 0.0, _delay),
+        "off_delay_s": ("number", False, 0.0, _delay),
     },
     "scanner": {
         "axes": ("string_list", True, None, None),

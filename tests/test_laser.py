@@ -76,7 +76,7 @@ def test_m4_floor_and_curve(tmp_path):
         ("m4_curve_speed = [0, 1]\nm4_curve_power = [0, 0.5, 1]\n", "equal lengths"),
         ("m4_curve_speed = [0, 0.7, 0.5, 1]\nm4_curve_power = [0, 0.1, 0.2, 1]\n", "rise strictly"),
         ("m4_curve_speed = [0, 1]\nm4_curve_power = [0, 2]\n", "in [0, 1]"),
-        ("on_delay_s = 0.001\n", "unknown key 'on_delay_s'"),  # latency is not applied yet: refused, not ignored
+        ("on_delay_s = 2\n", "ms?"),
         ("m4_gain = 1\n", "unknown key 'm4_gain'"),
     ],
 )

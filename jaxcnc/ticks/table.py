@@ -18,7 +18,7 @@ from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
-from jaxcnc.ticks.laser import power_of_rows
+from jaxcnc.ticks.laser import LatencyShift, power_of_rows, shift_laser_events
 from jaxcnc.ticks.pso import pso_events
 from jaxcnc.ticks.sample import Sampler, TickSampler, machine_axes, quantize
 
@@ -98,8 +98,23 @@ def write_samples(
     (:func:`jaxcnc.ticks.laser.power_of_rows`: M3 constant, M4 scaled with the speed over each tick).
     ``power_scale``: a function of the positions ``(m+1, n_axes)`` of ticks ``first .. first+m`` giving ``(m,)``
     factors on that power (a raster image's level under each tick, :func:`jaxcnc.ticks.raster.raster_levels`).
+    With laser latency (``[laser] on_delay_s``/``off_delay_s``) that power is the output wanted of the laser; the
+    channel and the ``laser`` events hold the command, early by the delays (:class:`jaxcnc.ticks.laser.LatencyShift`).
     """
     m = machine
+    events_out = events  # the programmed laser: what the burn must be
+    d_on, d_off = m.laser.delay_ticks(m.tick_hz) if power else (0, 0)
+    shift = None
+    if d_on or d_off:  # laser latency: the channel and the laser events commanded early (docs/laser.md)
+        shift = LatencyShift(d_on, d_off, sampler.n_rows, events, str(meta.get("source", "")), m.tick_hz)
+        meta = {**meta, "laser_delay_ticks": [d_on, d_off]}
+        events = shift_laser_events(events, d_on, d_off)
+        if events.size and events["tick"][0] < 0:  # switched on (at no power: M4 at rest) before the job starts
+            shift.too_early(int(events["tick"][0] + d_on))
+        las = events[events["kind"] == EventKind.LASER]
+        if (bad := np.flatnonzero(np.diff(las["tick"]) <= 0)).size:
+            t = int(las["tick"][bad[0] + 1] + (d_on if las["value"][bad[0] + 1] > 0 else d_off))
+            shift._fail(t, "the laser is switched off and on again faster than its delays allow")
     with TableWriter(
         path,
         axes=list(m.axis_names),
@@ -118,16 +133,30 @@ def write_samples(
             leave=False,
         )
         held: tuple[int, np.ndarray] | None = None  # one chunk back: its power needs the next chunk's first row
+        pending: list[tuple[np.ndarray, np.ndarray]] = []  # rows whose command waits for the output ahead of them
+        cmd = np.zeros(0, np.float32)
+
+        def flush(more: np.ndarray) -> None:
+            nonlocal cmd
+            cmd = np.concatenate([cmd, more])
+            while pending and pending[0][0].shape[0] <= cmd.size:
+                pos, fine = pending.pop(0)
+                w.write(pos, fine, cmd[: pos.shape[0]])
+                cmd = cmd[pos.shape[0] :]
 
         def put(first: int, p: np.ndarray, after: np.ndarray) -> None:
             pos, fine = quantize(p, m.discrete_mm)
             lit = None
             if power:
                 pa = np.vstack([p, after])
-                lit = power_of_rows(pa, events, first, m.tick_hz, m.laser)
+                lit = power_of_rows(pa, events_out, first, m.tick_hz, m.laser)
                 if power_scale is not None:
                     lit = (lit * power_scale(pa)).astype(np.float32)
-            w.write(np.asarray(pos), np.asarray(fine), lit)
+            if shift is None:
+                w.write(np.asarray(pos), np.asarray(fine), lit)
+            else:
+                pending.append((np.asarray(pos), np.asarray(fine)))
+                flush(shift.push(lit))
             bar.update(p.shape[0])
 
         for first, p in sampler:
@@ -137,6 +166,8 @@ def write_samples(
             held = (first, p)
         if held is not None:
             put(*held, held[1][-1:])  # at rest after the last row
+        if shift is not None:
+            flush(shift.finish())
         bar.close()
         w.events = events
     return Path(path)
