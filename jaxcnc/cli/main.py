@@ -418,10 +418,13 @@ def cmd_play(args: argparse.Namespace) -> int:
 def cmd_plot(args: argparse.Namespace) -> int:
     from jaxcnc.format import TableFile
     from jaxcnc.machine import load_machine
-    from jaxcnc.plot import plot_table
+    from jaxcnc.plot import plot_power, plot_table
 
     machine = load_machine(args.machine) if args.machine else None
-    out = plot_table(TableFile(args.table), args.output, machine)
+    if args.power:
+        out = plot_power(TableFile(args.table), args.output)
+    else:
+        out = plot_table(TableFile(args.table), args.output, machine)
     print(f"wrote {out}")
     return 0
 
@@ -808,6 +811,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("table", help="table file")
     sp.add_argument("--output", "-o", required=True, help="PNG file to write")
     sp.add_argument("--machine", "-m", help="draw this machine's limits")
+    sp.add_argument(
+        "--power", action="store_true", help="the laser instead: path coloured by power, power and speed over time"
+    )
     sp.set_defaults(func=cmd_plot, needs=("matplotlib",))
 
     sp = sub.add_parser(
