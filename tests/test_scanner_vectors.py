@@ -14,12 +14,14 @@ from hypothesis import strategies as st
 
 from jaxcnc.errors import JaxcncError
 from jaxcnc.format.vectors import (
+    PULSE_DTYPE,
     VECTOR_DTYPE,
     Op,
     VectorFileError,
     VectorHeader,
     check_records,
     encode_rows,
+    encode_rows_loop,
     execute,
     from_text,
     make,
@@ -201,3 +203,48 @@ def test_fuzz_text_reader(text):
         from_text("# jaxcnc vector list v1 tick_hz=100000.0 discrete_mm=0.001 axes=x,y meta={}\n" + text)
     except VectorFileError:
         pass
+
+
+def _random_table(rng: np.random.Generator, n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of constant speed, constant acceleration and jitter (short and long vectors), power in runs."""
+    v = np.zeros((n, k))
+    i = 0
+    while i < n:
+        m = min(int(rng.integers(1, 300)), n - i)
+        mode = int(rng.integers(3))
+        if mode == 0:
+            v[i : i + m] = rng.normal(0, 20, k)
+        elif mode == 1:
+            v[i : i + m] = np.outer(np.arange(m), rng.normal(0, 0.5, k))
+        else:
+            v[i : i + m] = rng.normal(0, 3, (m, k))
+        i += m
+    pos = np.round(np.cumsum(v, axis=0)).astype(np.int64)
+    power = np.repeat(rng.choice([0.0, 0.0, 1.5, 100.0], size=n // 50 + 1), 50)[:n]
+    return pos, power
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 2500), k=st.integers(1, 3), n_pulses=st.integers(0, 12))
+def test_vectorised_encoder_gives_the_loops_list_record_for_record(seed, n, k, n_pulses):
+    rng = np.random.default_rng(seed)
+    pos, power = _random_table(rng, n, k)
+    pulses = np.zeros(n_pulses, PULSE_DTYPE)
+    pulses["tick"] = rng.integers(-2, n + 2, n_pulses)  # some outside the table: neither encoder sends them
+    pulses["kind"] = rng.choice([9, 10], n_pulses)
+    pulses["aux"], pulses["value"] = rng.integers(0, 100, n_pulses), rng.random(n_pulses)
+    fast = encode_rows(pos, power, pulses if n_pulses else None)
+    assert fast.tobytes() == encode_rows_loop(pos, power, pulses if n_pulses else None).tobytes()
+    ex = execute(fast, H)
+    assert np.array_equal(ex.positions[:, :k], pos) and np.array_equal(ex.power, power)
+
+
+def test_vectorised_encoder_long_runs_and_per_tick_power():
+    """Long straight runs (the search past the vectorised lengths) and a power that changes at every tick."""
+    t = np.arange(40000)
+    pos = np.stack([7 * t, np.round(0.00001 * t**2)], 1).astype(np.int64)
+    power = np.where(t % 2 == 0, 1.0, 2.0)
+    power[20000:] = 0.0
+    fast = encode_rows(pos, power)
+    assert fast.tobytes() == encode_rows_loop(pos, power).tobytes()
+    assert np.array_equal(execute(fast, H).positions[:, :2], pos)

@@ -412,12 +412,141 @@ def _longest_linear(p: np.ndarray, k: int, stop: int) -> int:
     return lo
 
 
+#: Vector lengths the vectorised search tries for every row at once; a row whose doubling reaches beyond this
+#: (a long straight run) is searched on its own by :func:`_longest_linear` (the same probes).
+_SHORT = 32
+#: Rows whose search runs at once (bounds the probes' memory: rows x _SHORT x 3 int64).
+_BLOCK = 1 << 14
+
+
+def _fits_many(pos: np.ndarray, ks: np.ndarray, ms: np.ndarray) -> np.ndarray:
+    """For each ``(k, m)``: one vector from row k to row k+m reproduces rows k..k+m. ``ks``, ``ms`` ``(q,)``
+    int64, ``ms >= 2`` (row k+m itself is always hit). Returns ``(q,)`` bool; no Python step per row."""
+    cnt = ms - 1
+    owner = np.repeat(np.arange(ks.size), cnt)
+    j = np.arange(owner.size, dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
+    k = ks[owner]
+    got = _lerp(pos[k], pos[k + ms[owner]], j, ms[owner])
+    bad = np.any(got != pos[k + j], axis=1)
+    return np.bincount(owner[bad], minlength=ks.size) == 0
+
+
+def _vector_lengths(pos: np.ndarray, ks: np.ndarray, cap: np.ndarray) -> np.ndarray:
+    """:func:`_longest_linear` for many start rows at once (doubling, then bisection, with the same probes):
+    ``(q,)`` lengths, -1 where the doubling goes beyond :data:`_SHORT` (left to :func:`_longest_linear`)."""
+    good = np.ones(ks.size, np.int64)
+    m = np.full(ks.size, 2, np.int64)
+    live = m <= cap
+    long = np.zeros(ks.size, bool)
+    while live.any():  # doubling: one pass per power of two, every row at once
+        i = np.flatnonzero(live)
+        big = m[i] > _SHORT
+        long[i[big]] = True
+        i = i[~big]
+        ok = _fits_many(pos, ks[i], m[i]) if i.size else np.zeros(0, bool)
+        good[i[ok]] = m[i[ok]]
+        m[i[ok]] *= 2
+        live[:] = False
+        live[i[ok]] = m[i[ok]] <= cap[i[ok]]
+    lo, hi = good, np.minimum(m, cap + 1)
+    todo = (hi - lo > 1) & ~long
+    while todo.any():  # bisection, every row at once
+        i = np.flatnonzero(todo)
+        mid = (lo[i] + hi[i]) // 2
+        ok = _fits_many(pos, ks[i], mid)
+        lo[i[ok]] = mid[ok]
+        hi[i[~ok]] = mid[~ok]
+        todo[i] = hi[i] - lo[i] > 1
+    return np.where(long, -1, lo)
+
+
 def encode_rows(
     positions: np.ndarray,
     power: np.ndarray,
     pulses: np.ndarray | None = None,
 ) -> np.ndarray:
     """Timed vectors that reproduce a table tick for tick: LIST_START, TIMED_MARK/TIMED_JUMP, SET_LASER, pulses.
+
+    ``positions``: ``(n, k)`` int discretes, ``k <= 3`` (row 0 is where the list starts); ``power``: ``(n,)`` laser
+    output per row (0 = off); ``pulses``: records with fields ``tick``, ``kind`` (9 work, 10 idle), ``aux``,
+    ``value`` (the table's pulse events) or ``None``. Each vector is as long as the board's interpolation
+    (:func:`_lerp`) reproduces the rows exactly (found by doubling, then bisection); a vector ends where the laser
+    power changes and at every pulse. Returns records ending in LIST_END.
+
+    Vectorised: the vector length from every row is searched for all rows of a block at once
+    (:func:`_vector_lengths`); the list follows them from row 0 (one integer step per vector) and is assembled
+    with NumPy. The same records as :func:`encode_rows_loop`, record for record.
+    """
+    pos = np.zeros((positions.shape[0], 3), np.int64)
+    pos[:, : positions.shape[1]] = positions
+    power = np.asarray(power, np.float64)
+    n = pos.shape[0]
+    if n == 0:
+        raise ValueError("no rows to encode")
+    pulse_ticks = np.zeros(0, np.int64) if pulses is None else np.asarray(pulses["tick"], np.int64)
+    change = np.flatnonzero(power[1:] != power[:-1])
+    breaks = np.unique(np.concatenate([[0, n - 1], change, pulse_ticks[(pulse_ticks > 0) & (pulse_ticks < n)]]))
+    # the length of the vector that would start at each row (up to the next break)
+    lengths = np.zeros(n, np.int64)
+    for first in range(0, n - 1, _BLOCK):  # blocks of rows: bounded memory
+        ks = np.arange(first, min(first + _BLOCK, n - 1), dtype=np.int64)
+        cap = breaks[np.searchsorted(breaks, ks, side="right")] - ks
+        lengths[ks] = _vector_lengths(pos, ks, cap)
+    # the list: vectors from row 0 on (each ends where the next starts; breaks are reached exactly)
+    starts: list[int] = []
+    lens = lengths.tolist()
+    nxt = breaks[1:].tolist()
+    b_i, k = 0, 0
+    while k < n - 1:  # one integer step per vector
+        while nxt[b_i] <= k:
+            b_i += 1
+        m = lens[k]
+        if m < 0:
+            m = _longest_linear(pos, k, nxt[b_i])
+        starts.append(k)
+        k += m
+    ks = np.asarray(starts, np.int64)
+    ends = np.concatenate([ks[1:], [n - 1]]) if ks.size else ks
+    vec = np.zeros(ks.size, VECTOR_DTYPE)
+    vec["op"] = np.where(power[ks + 1] > 0, Op.TIMED_MARK, Op.TIMED_JUMP) if ks.size else 0
+    vec["ticks"] = ends - ks
+    vec["pos"] = pos[ends]
+    # laser power where an interval's power differs from the one before and is on
+    a = breaks[:-1]
+    a = a[(power[a + 1] != power[a]) & (power[a + 1] > 0)]
+    las = np.zeros(a.size, VECTOR_DTYPE)
+    las["op"], las["value"] = Op.SET_LASER, power[a + 1]
+    # pulses at row 0 and at the breaks (each after the vector that reaches its row), in the table's order
+    if pulses is not None and len(pulses):
+        sel = np.flatnonzero((pulse_ticks == 0) | np.isin(pulse_ticks, breaks[1:]))
+        e = pulses[sel]
+        idle = np.asarray(e["kind"]) == 10
+        pul = np.zeros(sel.size, VECTOR_DTYPE)
+        pul["op"], pul["flags"] = Op.LASER_PULSE, np.where(idle, FLAG_IDLE, 0)
+        pul["aux"] = np.where(idle, -1, np.asarray(e["aux"], np.int64))
+        pul["value"] = np.asarray(e["value"], np.float64)
+        p_tick = pulse_ticks[sel]
+    else:
+        pul, p_tick, sel = np.zeros(0, VECTOR_DTYPE), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    head = [make(Op.LIST_START, pos[0], value=power[0])]
+    if power[0] > 0:
+        head.append(make(Op.SET_LASER, value=power[0]))
+    # order: pulses at a row, then the laser power of the interval starting there, then its vector
+    body = np.concatenate([pul, las, vec])
+    key_row = np.concatenate([p_tick, a, ks])
+    key_sub = np.concatenate([np.zeros(pul.size, np.int64), np.ones(las.size, np.int64), np.full(ks.size, 2)])
+    key_seq = np.concatenate([sel, np.zeros(las.size + ks.size, np.int64)])
+    body = body[np.lexsort((key_seq, key_sub, key_row))]
+    return np.concatenate([records(head), body, records([make(Op.LIST_END)])])
+
+
+def encode_rows_loop(
+    positions: np.ndarray,
+    power: np.ndarray,
+    pulses: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`encode_rows` one Python step per vector: the first implementation, kept as its reference (the
+    tests compare the two, record for record, on random tables).
 
     ``positions``: ``(n, k)`` int discretes, ``k <= 3`` (row 0 is where the list starts); ``power``: ``(n,)`` laser
     output per row (0 = off); ``pulses``: records with fields ``tick``, ``kind`` (9 work, 10 idle), ``aux``,
@@ -732,7 +861,7 @@ def _render(low: _Lowering, final: np.ndarray, vectors: int) -> Execution:
     seg = np.array(low.seg, dtype=np.float64) if low.seg else np.zeros((0, 13))
     counts = seg[:, 6].astype(np.int64)
     total = 1 + int(counts.sum())
-    starts = 1 + np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    starts = 1 + (np.cumsum(counts) - counts).astype(np.int64)  # (no segments: a list of one row)
     idx = np.repeat(np.arange(counts.size), counts)
     j = np.arange(1, total, dtype=np.int64) - np.repeat(starts, counts) + 1
     nn = counts[idx]
