@@ -127,6 +127,18 @@ class GalvoConfig:
     #: are the stage, these two the beam's offset in the field (their ``[axes.*]`` limits, min/max the field,
     #: home 0 its centre); a G-code program switches between the two with M170 / M171. Empty: scanner-only.
     axes: tuple[str, ...] = ()
+    #: The board's delays and sky-writing (``docs/scanner.md``), each in seconds at the board (ticks =
+    #: round(s * tick_hz)); ``None``: chosen from the head model (:func:`jaxcnc.scanner.compile.auto_settings`).
+    laser_on_delay_s: float | None = None
+    laser_off_delay_s: float | None = None
+    jump_delay_s: float | None = None
+    mark_delay_s: float | None = None
+    polygon_delay_s: float | None = None
+    variable_polygon: bool | None = None
+    sky_writing: float | None = None  # mode 0 off, 1 chain ends, 2 also corners turning more than sky_limit_deg
+    run_in_s: float | None = None
+    run_out_s: float | None = None
+    sky_limit_deg: float | None = None
 
     @property
     def stage(self) -> bool:
@@ -270,6 +282,24 @@ def _mirror_accel(v: float) -> str | None:
     return None if v <= 1e10 else f"{v:g} mm/s² is beyond any galvo mirror (1e10 mm/s² at the field)"
 
 
+def _laser_delay(v: float) -> str | None:
+    ok = math.isfinite(v) and -0.01 <= v <= 0.1
+    return None if ok else "must lie in [-0.01, 0.1] s (a board's laser delay; was it given in µs?)"
+
+
+def _board_delay(v: float) -> str | None:
+    ok = math.isfinite(v) and 0 <= v <= 0.1
+    return None if ok else "must lie in [0, 0.1] s (a board's scanner delay; was it given in µs?)"
+
+
+def _sky_mode(v: float) -> str | None:
+    return None if v in (0, 1, 2) else "sky-writing mode is 0 (off), 1 (chain ends) or 2 (also corners)"
+
+
+def _sky_limit(v: float) -> str | None:
+    return None if math.isfinite(v) and 0 <= v <= 180 else "must lie in [0, 180] degrees"
+
+
 def _name(v: str) -> str | None:
     return None if v.strip() == v and v else "must be a non-empty name without surrounding spaces"
 
@@ -333,6 +363,16 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "mirror_a_max_mm_s2": ("number", True, None, _mirror_accel),
         "damping": ("number", False, 1.0, _damping),
         "axes": ("string_list", False, (), None),
+        "laser_on_delay_s": ("number", False, None, _laser_delay),
+        "laser_off_delay_s": ("number", False, None, _laser_delay),
+        "jump_delay_s": ("number", False, None, _board_delay),
+        "mark_delay_s": ("number", False, None, _board_delay),
+        "polygon_delay_s": ("number", False, None, _board_delay),
+        "variable_polygon": ("bool", False, None, None),
+        "sky_writing": ("number", False, None, _sky_mode),
+        "run_in_s": ("number", False, None, _board_delay),
+        "run_out_s": ("number", False, None, _board_delay),
+        "sky_limit_deg": ("number", False, None, _sky_limit),
     },
 }
 _TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner", "galvo")

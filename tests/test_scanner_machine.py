@@ -79,3 +79,34 @@ def test_plan_on_a_galvo_machine(tmp_path, capsys):
     assert main(["plan", str(prog), "-m", str(m), "-o", str(tmp_path / "q.ticks"), "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "g.toml:21: [galvo.damping] 9.0: must lie in [0.1, 2]" in err[0]
+
+
+def test_galvo_delays_from_the_machine_file_override_the_model():
+    from jaxcnc.scanner.compile import Settings, machine_settings
+
+    text = GALVO + "laser_on_delay_s = 120e-6\njump_delay_s = 0.001\nsky_writing = 1\nrun_in_s = 50e-6\n"
+    m = parse_machine(text, "g.toml")
+    auto = Settings(laser_on=15, laser_off=15, jump=884, sky_mode=2, run_in=186, run_out=186, sky_limit_deg=2.0)
+    s = machine_settings(m, auto)
+    # given keys in seconds -> board ticks at 100 kHz; the others from the model's choice
+    assert (s.laser_on, s.jump, s.sky_mode, s.run_in) == (12, 100, 1, 5)
+    assert (s.laser_off, s.run_out, s.sky_limit_deg) == (15, 186, 2.0)
+    assert machine_settings(parse_machine(GALVO, "g.toml"), auto) == auto
+
+
+@pytest.mark.parametrize(
+    ("key", "message"),
+    [
+        ("jump_delay_s = 5", r"\[galvo.jump_delay_s\] 5.0: must lie in \[0, 0.1\] s"),
+        ("mark_delay_s = -1e-4", r"\[galvo.mark_delay_s\] -0.0001: must lie in \[0, 0.1\] s"),
+        ("laser_off_delay_s = 200", r"must lie in \[-0.01, 0.1\] s"),
+        ("sky_writing = 3", r"\[galvo.sky_writing\] 3.0: sky-writing mode is 0 \(off\), 1"),
+        ("sky_limit_deg = 270", r"\[galvo.sky_limit_deg\] 270.0: must lie in \[0, 180\] degrees"),
+        ("variable_polygon = 1", r"\[galvo.variable_polygon\] expected true or false"),
+        ("run_in_ticks = 5", r"\[galvo.run_in_ticks\] unknown key 'run_in_ticks'"),
+    ],
+)
+def test_galvo_delay_key_errors_name_file_line_and_cause(key, message):
+    with pytest.raises(MachineFileError, match=message) as info:
+        parse_machine(GALVO + key + "\n", "g.toml")
+    assert info.value.line == 22 and str(info.value).startswith("g.toml:22: ")

@@ -17,8 +17,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import shapely
 
+from jaxcnc.errors import MachineFileError
 from jaxcnc.format import FINE_SCALE, EventKind
 from jaxcnc.format.vectors import Op, VectorHeader, encode_rows, execute, make, records
+from jaxcnc.machine import MachineConfig
 from jaxcnc.scanner.head import HeadModel, simulate
 
 
@@ -88,7 +90,8 @@ def auto_settings(
     Laser on/off delays: the tracking error (the mirrors pass a point ``τ`` after the command). With ``sky``
     (mode 2): the shortest run-in/run-out (tried on the model: doubling, then bisection) for which a 150°, 90°
     and 30° corner stay within half ``tol_mm`` while lit; the limit angle is the largest turn the model rounds by
-    less than half the tolerance without sky-writing. Without ``sky``: mark, jump and (variable) polygon delays
+    less than half the tolerance without sky-writing (a ladder of turns up to 30°, then bisection to 0.05°).
+    Without ``sky``: mark, jump and (variable) polygon delays
     long enough for the mirrors to settle within the tolerance at a stop.
     """
     lag = max(0, round(head.tracking_error_s / dt_s))
@@ -109,15 +112,52 @@ def auto_settings(
         while hi - lo > 1:
             mid = (lo + hi) // 2
             lo, hi = (lo, mid) if ok(mid) else (mid, hi)
-        limit = 0.0
         plain = replace(base, sky_mode=0)
-        for ang in (1.0, 2.0, 5.0, 10.0, 15.0, 20.0, 30.0):
-            if _corner_trial(head, plain, mark_speed_mm_s, ang, dt_s, discrete_mm) > half:
+
+        def rounds_within(ang: float) -> bool:
+            return _corner_trial(head, plain, mark_speed_mm_s, ang, dt_s, discrete_mm) <= half
+
+        # the ladder finds the first turn rounded too far (the rounding grows with the turn up to ~90 degrees, not
+        # beyond: a reversal retraces the line), bisection then pins the limit between two rungs to 0.05 degrees
+        limit, bad = 0.0, None
+        for ang in (0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 15.0, 20.0, 30.0):
+            if not rounds_within(ang):
+                bad = ang
                 break
             limit = ang
-        return replace(base, run_in=hi, run_out=hi, sky_limit_deg=limit, jump=jump)
+        while bad is not None and bad - limit > 0.05:
+            mid = 0.5 * (limit + bad)
+            limit, bad = (mid, bad) if rounds_within(mid) else (limit, mid)
+        return replace(base, run_in=hi, run_out=hi, sky_limit_deg=round(limit, 2), jump=jump)
     settle = settle_ticks(head, mark_speed_mm_s, dt_s, half)
     return Settings(laser_on=lag, laser_off=lag, jump=jump, mark=settle, polygon=2 * settle, variable_polygon=True)
+
+
+def machine_settings(machine: MachineConfig, auto: Settings | None = None) -> Settings:
+    """The board settings of a machine file: every ``[galvo]`` delay and sky-writing key given there (seconds at
+    the board, rounded to ticks at ``[machine] tick_hz``), the others from ``auto`` (e.g. :func:`auto_settings`;
+    ``None``: no delays). Code can still pass any :class:`Settings` of its own."""
+    g = machine.galvo
+    if g is None:
+        raise MachineFileError(machine.source, "galvo", f"machine {machine.name!r} has no [galvo] table")
+    s = auto or NO_DELAYS
+    hz = machine.tick_hz
+
+    def ticks(v: float | None, default: int) -> int:
+        return default if v is None else round(v * hz)
+
+    return Settings(
+        laser_on=ticks(g.laser_on_delay_s, s.laser_on),
+        laser_off=ticks(g.laser_off_delay_s, s.laser_off),
+        jump=ticks(g.jump_delay_s, s.jump),
+        mark=ticks(g.mark_delay_s, s.mark),
+        polygon=ticks(g.polygon_delay_s, s.polygon),
+        variable_polygon=s.variable_polygon if g.variable_polygon is None else g.variable_polygon,
+        sky_mode=s.sky_mode if g.sky_writing is None else int(g.sky_writing),
+        run_in=ticks(g.run_in_s, s.run_in),
+        run_out=ticks(g.run_out_s, s.run_out),
+        sky_limit_deg=s.sky_limit_deg if g.sky_limit_deg is None else g.sky_limit_deg,
+    )
 
 
 def settle_ticks(head: HeadModel, speed_mm_s: float, dt_s: float, tol_mm: float) -> int:
