@@ -21,7 +21,7 @@ from jaxcnc.errors import SourceError
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import outside_travel
 from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
-from jaxcnc.planners.pulsed import seed, stop_and_go, sync  # noqa: F401  (register the planners)
+from jaxcnc.planners.pulsed import bang, seed, stop_and_go, sync  # noqa: F401  (register the planners)
 from jaxcnc.planners.pulsed.bound import lower_bound_travel
 from jaxcnc.planners.pulsed.request import (
     PulsePlan,

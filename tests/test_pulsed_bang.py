@@ -1,0 +1,85 @@
+"""The ``bang`` planner: two- and three-phase constant-acceleration gaps, knot speeds by interval propagation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jaxcnc.bench.pulsed import _check_tables, glass_engraver, program_points
+from jaxcnc.io import clouds
+from jaxcnc.io.points import PointJob
+from jaxcnc.machine import parse_machine
+from jaxcnc.planners.pulsed import plan_points
+from jaxcnc.planners.pulsed.bang import project
+
+GLASS = glass_engraver()
+
+
+def job(pts: np.ndarray, name: str) -> PointJob:
+    return PointJob(pts, None, np.arange(1, len(pts) + 1), name)
+
+
+@pytest.mark.parametrize("name", ["program", "short-rows", "sparse"])
+def test_bang_tables_verified_and_above_the_bound(name):
+    """Every table written and checked at every tick (limits, windows, hits); the burn above the bound."""
+    pts = program_points(8, 3000) if name == "program" else clouds.HARD_CASES[name]()[:1500]
+    planned = plan_points(job(pts, name), GLASS, "bang")
+    assert planned.plan.planner == "bang"
+    assert _check_tables({"bang": planned}, GLASS) == "bang: ok"
+    assert planned.lower_bound_travel_s <= planned.plan.burn_time_s
+
+
+def test_bang_row_changes_beat_the_spline_on_rows():
+    """On a raster solid (long rows, a row change every ~100 points) bang is shorter than sync."""
+    pts = program_points(8, 3000)
+    bang = plan_points(job(pts, "p8"), GLASS, "bang").plan.burn_time_s
+    sync = plan_points(job(pts, "p8"), GLASS, "sync").plan.burn_time_s
+    assert bang < sync
+
+
+def test_best_keeps_the_shorter():
+    pts = clouds.HARD_CASES["sparse"]()[:300]
+    times = {p: plan_points(job(pts, "s"), GLASS, p).plan.burn_time_s for p in ("sync", "bang", "best")}
+    assert times["best"] == min(times["sync"], times["bang"])
+
+
+def test_jerk_limited_machine_falls_back_to_sync():
+    from importlib import resources
+
+    text = resources.files("jaxcnc.data").joinpath("glass-engraver.toml").read_text()
+    text = text.replace(
+        "a_max = 300.0\nmin = 0.0\nmax = 300.0\n\n[axes.y]",
+        "a_max = 300.0\nj_max = 1e5\nmin = 0.0\nmax = 300.0\n\n[axes.y]",
+    )
+    machine = parse_machine(text, "jerk.toml")
+    pts = program_points(8, 200)
+    assert plan_points(job(pts, "p"), machine, "bang").plan.planner == "sync"
+
+
+def test_projection_matches_brute_force():
+    """The closed-form interval of reachable exit speeds equals a dense search over entry/exit pairs."""
+    rng = np.random.default_rng(5)
+    A, cap = np.array([300.0]), np.array([17.0])
+    for _ in range(40):
+        D, h = rng.uniform(-0.5, 0.5), rng.uniform(0.02, 0.08)
+        lo0 = rng.uniform(-10, 5)
+        hi0 = lo0 + rng.uniform(0, 8)
+        cruise = bool(rng.random() < 0.5)
+        ok, L, U = (
+            np.asarray(x)[0] for x in project(np.array([lo0]), np.array([hi0]), np.array([D]), h, A, cap, cruise)
+        )
+        v0 = np.linspace(lo0, hi0, 401)[:, None]
+        v1 = np.linspace(-cap[0], cap[0], 4001)[None]
+        m = D / h
+        if cruise:
+            vc = 4 * m / 3 - (v0 + v1) / 6
+            good = (np.abs(vc - v0) <= A * h / 4) & (np.abs(v1 - vc) <= A * h / 4) & (np.abs(vc) <= cap)
+        else:
+            good = (np.abs(4 * m - 3 * v0 - v1) <= A * h) & (np.abs(-4 * m + v0 + 3 * v1) <= A * h)
+            good &= np.abs(2 * m - (v0 + v1) / 2) <= cap
+        good &= np.abs(v0) <= cap
+        reach = v1[0][good.any(axis=0)]
+        assert bool(ok) == (reach.size > 0)
+        if reach.size:
+            step = 2 * cap[0] / 4000 + (hi0 - lo0) / 400 * 7
+            assert abs(reach.min() - L) <= step and abs(reach.max() - U) <= step
