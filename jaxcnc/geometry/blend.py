@@ -176,14 +176,20 @@ def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
     """:func:`~jaxcnc.geometry.blend_kernel.blend_kernel` on NumPy arrays, ``KERNEL_CHUNK`` blends at a time
     (bounded working memory), each chunk padded to a bucket."""
     n = pts.shape[0]
-    parts = []
+    out: dict[str, np.ndarray] = {}
     for lo in range(0, max(n, 1), KERNEL_CHUNK):
         hi = min(n, lo + KERNEL_CHUNK)
         m = bucket_size(hi - lo)
         pad_pts = np.concatenate([pts[lo:hi], np.broadcast_to(_UNIT_BLEND, (m - (hi - lo), 6, 3))])
         pad_corner = np.concatenate([corner[lo:hi], np.zeros((m - (hi - lo), 3))])
-        parts.append({k: np.asarray(v)[: hi - lo] for k, v in blend_kernel(pad_pts, pad_corner).items()})
-    return parts[0] if len(parts) == 1 else {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        part = {k: np.asarray(v)[: hi - lo] for k, v in blend_kernel(pad_pts, pad_corner).items()}
+        if hi - lo == n:
+            return part  # one chunk: its arrays as they are
+        for k, v in part.items():  # into arrays of all n blends, chunk by chunk (no list of parts to join)
+            if k not in out:
+                out[k] = np.empty((n,) + v.shape[1:], v.dtype)
+            out[k][lo:hi] = v
+    return out
 
 
 #: Blends measured by one call of the kernel.
@@ -374,17 +380,16 @@ def _blend_fields(
         width /= 2
         key = np.concatenate([key[bad], key[bad] + width])
         found = _kernel(pts, pts[:, 0])
-    cols: dict[str, list] = {}
-    for found_k, pts_k, ok, owner_k, key_k in parts:
-        for name, val in (("found", None), ("origin", pts_k[:, 0]), ("owner", owner_k), ("key", key_k)):
-            if name == "found":
-                for f, v in found_k.items():
-                    cols.setdefault(f, []).append(v[ok])
-            else:
-                cols.setdefault(name, []).append(val[ok])
-    out = {k: np.concatenate(v) for k, v in cols.items()}
-    order = np.argsort(out.pop("key"), kind="stable")
-    out = {k: v[order] for k, v in out.items()}
+    if len(parts) == 1 and parts[0][2].all():  # no blend split: the kernel's arrays, in order already
+        out = dict(parts[0][0], origin=parts[0][1][:, 0], owner=parts[0][3])
+    else:  # the pieces of every round, ordered by key; one field at a time (bounded extra memory)
+        order = np.argsort(np.concatenate([p[4][p[2]] for p in parts]), kind="stable")
+        out = {}
+        for f in parts[0][0]:
+            out[f] = np.concatenate([p[0][f][p[2]] for p in parts])[order]
+        out["origin"] = np.concatenate([p[1][p[2], 0] for p in parts])[order]
+        out["owner"] = np.concatenate([p[3][p[2]] for p in parts])[order]
+    del parts
     owner = out["owner"]
     # a blend's ends have exactly its neighbours' tangents
     first = np.concatenate([[True], owner[1:] != owner[:-1]])
