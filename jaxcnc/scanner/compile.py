@@ -112,7 +112,7 @@ def auto_settings(
         while hi - lo > 1:
             mid = (lo + hi) // 2
             lo, hi = (lo, mid) if ok(mid) else (mid, hi)
-        plain = replace(base, sky_mode=0)
+        plain = replace(base, sky_mode=1, run_in=hi, run_out=hi)  # the ends sky-written: the corner alone counts
 
         def rounds_within(ang: float) -> bool:
             return _corner_trial(head, plain, mark_speed_mm_s, ang, dt_s, discrete_mm) <= half
