@@ -792,7 +792,7 @@ def check_table(
         from jaxcnc.ticks.split import check_split  # stage + scanner: the tool point is main + scanner
 
         chk = check_split(table, machine, prog)
-        meas.path_note = (
+        meas.path_summary = (
             f"stage + scanner: tool point within {chk.max_tool_deviation_mm:.3g} mm of the program at every tick "
             f"(allowed one discrete), scanner at most {100 * chk.max_field_use:.1f} % of its field"
         )
@@ -801,7 +801,7 @@ def check_table(
         from jaxcnc.ticks.external import check_external  # stage + galvo: the tool point is stage + beam
 
         ext = check_external(table, machine, prog)
-        meas.path_note = (
+        meas.path_summary = (
             f"stage + galvo: tool point within {ext.max_tool_deviation_mm:.3g} mm of the program at every tick, "
             f"stage still while the scanner runs (moved {ext.max_stage_motion_in_scanner_mm:.3g} mm)"
         )

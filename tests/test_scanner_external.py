@@ -108,7 +108,7 @@ def test_cut_mark_cut_one_table_both_groups(planned):
     prog = load_program(d / "p.ngc", m)
     assert set(prog.line[blocks["value"].astype(int)]) >= {2, 4, 7, 9, 10, 11, 12, 15, 17}
     tab, meas = check_table(d / "p.ticks", d / "m.toml")
-    assert meas.violations == [] and "stage still while the scanner runs" in meas.path_note
+    assert meas.violations == [] and "stage still while the scanner runs" in meas.path_summary
 
 
 def test_the_scanner_list_runs_its_section_tick_for_tick(planned):

@@ -254,8 +254,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def _path_line(meas) -> str:
     """The check's summary of the path comparison."""
-    if meas.path is None and meas.path_note.startswith("stage + scanner"):
-        return f"  path: {meas.path_note}"
+    if meas.path_summary:  # compared by the machine's own check (stage + scanner, stage + galvo)
+        return f"  path: {meas.path_summary}"
     if meas.path is None:
         return f"  path: not compared: {meas.path_note}"
     pd = meas.path

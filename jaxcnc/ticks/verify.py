@@ -79,6 +79,7 @@ class Measurement:
     pulses: Any = None  # a pulsed table's PulseCheck (jaxcnc.ticks.verify_pulses), when checked
     path: Any = None  # the PathDeviation (jaxcnc.ticks.deviation), when the program was compared
     path_note: str = ""  # why the path was not compared, when it was not
+    path_summary: str = ""  # the path compared by a machine's own check (stage + scanner, stage + galvo): its result
     laser: Any = None  # the LaserCheck (jaxcnc.ticks.verify_laser), when the table has a power channel
 
     @property
