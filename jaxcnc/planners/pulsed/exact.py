@@ -171,7 +171,10 @@ def exact_window(
     h = _nlp(ca, pts, np.full(g, n_min / f), big, guess_s, V, A, steps, tol)
     relaxed_s = float(h.sum())
     m = np.maximum(np.ceil(h * f / n_max - 1e-9), 1).astype(np.int64) if idle else np.ones(g, np.int64)
-    h2 = _nlp(ca, pts, m * n_min / f, m * n_max / f, np.clip(h, m * n_min / f, m * n_max / f), V, A, steps, tol)
+    try:
+        h2 = _nlp(ca, pts, m * n_min / f, m * n_max / f, np.clip(h, m * n_min / f, m * n_max / f), V, A, steps, tol)
+    except PlanningError:  # those period counts admit no motion: round the relaxed durations instead
+        h2 = h
     base = np.ceil(h2 * f - 1e-6).astype(np.int64)
     for i in range(200):
         stretch = 1.0 + 1e-3 * i
