@@ -233,6 +233,7 @@ class Receiver:
             self.state = "active"
         if f.type == DATA:
             self._data(f)
+            self.run_clock(now)  # the ticks due now take these rows too: the credit sent back counts them
             return Reply(self.reply(ACK))
         if f.type == END:
             if not self.ended and f.tick == self.next_tick:  # every row in: the job's true length
@@ -546,6 +547,9 @@ def serve(
                     break
                 if receiver.done and done_at is None:
                     done_at = now
+                    owner_peer = owner_sock if scheme == "tcp" else udp_owner
+                    if owner_peer is not None:  # the last row ran: say so now, not at the player's next END
+                        send(owner_peer, receiver.reply(DONE))
                 silent = now - (receiver.last_owner_frame if receiver.session is not None else started)
                 if done_at is None and silent > idle_timeout:
                     who = "the player" if receiver.session is not None else "any player"

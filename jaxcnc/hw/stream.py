@@ -61,11 +61,13 @@ TYPE_NAMES = {
 KEYED = 1  # flags: an HMAC-SHA256 tag follows the CRC
 RESUME = 2  # flags (HELLO): resume the session named in the frame after a lost link
 POWER = 4  # flags (DATA): the rows' laser power follows them, one float32 (finite, >= 0) per row
-ROWS_PER_FRAME = 256  # a DATA frame stays well below a UDP datagram's limit
+MAX_ROWS = 8192  # rows in one DATA frame (a receiver refuses more)
+ROWS_PER_FRAME = 256  # what the player puts in a UDP datagram: a DATA frame stays well below a datagram's limit
+TCP_ROWS_PER_FRAME = MAX_ROWS  # ... and in a TCP frame: few frames (and acknowledgements) per second at 100 kHz
 MAX_AXES = 32
 MAX_EVENTS = 1024  # events in one DATA frame
 MAX_TEXT = 512  # bytes of a REFUSED frame's reason
-MAX_FRAME = HEADER.size + ROWS_PER_FRAME * (MAX_AXES + 1) * 4 + MAX_EVENTS * EVENT_DTYPE.itemsize + CRC.size + TAG_SIZE
+MAX_FRAME = HEADER.size + MAX_ROWS * (MAX_AXES + 1) * 4 + MAX_EVENTS * EVENT_DTYPE.itemsize + CRC.size + TAG_SIZE
 NONCE = struct.Struct("<Q")  # HELLO's payload: the player's nonce
 STATUS = struct.Struct("<QI")  # WELCOME, ACK, DONE, STOPPED: the nonce echoed (WELCOME) and the underrun count
 STATUS_TYPES = (WELCOME, ACK, DONE, STOPPED)
@@ -199,7 +201,7 @@ def decode(data: bytes, key: bytes | None = None) -> Frame:
     rows = events = power = None
     nonce, underruns, text = 0, 0, ""
     if typ == DATA:
-        if not 1 <= n_axes <= MAX_AXES or not 1 <= count <= ROWS_PER_FRAME or n_events > MAX_EVENTS:
+        if not 1 <= n_axes <= MAX_AXES or not 1 <= count <= MAX_ROWS or n_events > MAX_EVENTS:
             raise ProtocolError("DATA frame out of range (axes, rows or events)")
         if tick < 0:
             raise ProtocolError("DATA frame for a negative tick")
@@ -344,7 +346,7 @@ class FramedTCP:
         if not ready:
             return None
         self.sock.settimeout(self.send_timeout)
-        chunk = self.sock.recv(1 << 16)
+        chunk = self.sock.recv(1 << 20)
         if not chunk:
             raise ConnectionError("peer closed the connection")
         self.buf += chunk

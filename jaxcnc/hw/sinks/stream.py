@@ -43,6 +43,7 @@ from jaxcnc.hw.stream import (
     ROWS_PER_FRAME,
     STOP,
     STOPPED,
+    TCP_ROWS_PER_FRAME,
     VERSION,
     WELCOME,
     AuthError,
@@ -402,7 +403,7 @@ class StreamSink:
         return max(0, self.credit - in_flight)
 
     def _frames(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None):
-        step = ROWS_PER_FRAME
+        step = TCP_ROWS_PER_FRAME if self.scheme == "tcp" else ROWS_PER_FRAME
         for i in range(0, rows.shape[0], step):
             part = rows[i : i + step]
             lit = None if power is None else power[i : i + step]
@@ -420,7 +421,8 @@ class StreamSink:
             )
 
     def write(self, first_tick: int, rows: np.ndarray, events: np.ndarray, power: np.ndarray | None = None) -> None:
-        """Frame the rows (256 a frame) with their power (the POWER flag) and events; send, keep until acked."""
+        """Frame the rows (8192 a TCP frame, 256 a UDP datagram) with their power (the POWER flag) and events;
+        send, keep until acked."""
         for frame in self._frames(first_tick, rows, events, power):
             self.retained[frame.tick] = frame
             self._guard(self._send, frame)
