@@ -66,7 +66,7 @@ def test_projection_matches_brute_force():
         hi0 = lo0 + rng.uniform(0, 8)
         cruise = bool(rng.random() < 0.5)
         ok, L, U = (
-            np.asarray(x)[0] for x in project(np.array([lo0]), np.array([hi0]), np.array([D]), h, A, cap, cruise)
+            np.asarray(x)[0] for x in project(np.array([lo0]), np.array([hi0]), np.array([D]), h, A, cap, cap, cruise)
         )
         v0 = np.linspace(lo0, hi0, 401)[:, None]
         v1 = np.linspace(-cap[0], cap[0], 4001)[None]
@@ -83,3 +83,22 @@ def test_projection_matches_brute_force():
         if reach.size:
             step = 2 * cap[0] / 4000 + (hi0 - lo0) / 400 * 7
             assert abs(reach.min() - L) <= step and abs(reach.max() - U) <= step
+
+
+def test_sweeps_never_lengthen_and_path_speed_within_feed_at_pulses_and_rapid_between():
+    """Each sweep's total is at most the previous one's; the path speed is within the feed at every work
+    pulse and within the rapid at every tick (the dark moves between pulses)."""
+    from jaxcnc.planners.protocol import with_margin
+
+    pts = clouds.HARD_CASES["sparse"]()[:400]
+    plan = plan_points(job(pts, "s"), GLASS, "bang").plan
+    passes = plan.stats["pass_ticks"]
+    assert all(b <= a for a, b in zip(passes, passes[1:], strict=False))
+    traj = plan.trajectory
+    ticks = np.arange(traj.n_ticks + 1)
+    vel = np.diff(traj.position(ticks), axis=0) * traj.tick_hz  # mean over each tick
+    speed = np.linalg.norm(vel, axis=1)
+    assert speed.max() <= with_margin(GLASS.path.rapid) * (1 + 1e-9)
+    assert speed.max() > with_margin(GLASS.path.feed)  # jumps do use the rapid
+    at_pulse = np.maximum(speed[plan.work_tick[1:-1] - 1], speed[plan.work_tick[1:-1]])
+    assert at_pulse.max() <= with_margin(GLASS.path.feed) * (1 + 1e-3)

@@ -1,29 +1,37 @@
-"""``hermite``: a C¹ plan whose knot speeds are chosen by interval propagation — fast row changes and jumps.
+"""``bang``: constant-acceleration pieces between pulses, knot speeds by interval propagation.
 
 ``sync`` passes one C² spline through the points: the smoothest motion (least ``∫a²``), not the one with
 the least peak acceleration, so at a row change (the x axis reverses, y steps 125 µm) and across jumps it
-needs about three extra periods. Here each gap is a cubic Hermite piece between the point positions and
-*free* knot speeds ``v_g`` (per axis): on gap ``g`` of ``h`` seconds and displacement ``D``
+needs about three extra periods. Here each gap is two halves of constant acceleration per axis (three
+phases, ¼ ½ ¼, accelerate / cruise / decelerate, on jumps long enough to reach the cap) between the point
+positions and *free* knot speeds; every limit on a gap is then *linear* in its pair of knot speeds
+(:func:`_rows`): a convex polygon, whose projection (:func:`project`) maps an interval of entry speeds to
+the interval of reachable exit speeds, per axis, in closed form.
 
-    a(0) h = 6 D/h − 4 v_0 − 2 v_1,   a(h) h = −6 D/h + 2 v_0 + 4 v_1,   (acceleration linear in between)
+Durations are chosen by greedy sweeps (``lax.scan`` s over the gaps, nothing sampled):
 
-and the speed, a quadratic, stays inside the hull of its Bézier control values ``v_0, 3 D/h − v_0 − v_1,
-v_1``. So ``|a| <= A`` and ``|v| <= V`` on the whole gap are *linear* conditions on the pair ``(v_0, v_1)``:
-a convex polygon. A forward scan keeps, per axis, the interval of speeds the knot can have given every
-duration chosen so far (the polygon's projection, closed form), and gives each gap the shortest
-admissible tick count among its candidates for which every axis' interval stays non-empty; the last knot
-must allow rest. A backward scan then picks each knot's speed inside its interval (nearest the mean of
-its neighbours' mean speeds). Both are ``lax.scan`` s over the gaps; nothing is sampled.
+1. A forward sweep gives each gap its shortest admissible candidate tick count after which every axis'
+   interval stays non-empty and the next :data:`LOOKAHEAD` gaps still fit at their shortest.
+2. :data:`PASSES` sweeps, alternately backward and forward, each against the previous durations: the
+   speeds from which the rest of the job can still be completed are those reachable from the far end's
+   rest with the previous durations (a :func:`reachable` scan the other way, time reversed), so a sweep
+   takes each gap's shortest candidate whose exit interval meets that set — it never boxes itself in,
+   the previous duration is always a candidate, and the total never grows.
+3. A forward :func:`reachable` scan with the final durations and a backward scan pick each knot's speed
+   inside its interval (nearest the mean of its neighbours' mean speeds).
 
-The motion reverses x and steps y within one period at a row change where the spline needed three
-(``y`` wiggles along the row between pulses so it arrives at the row's end moving), and enters each jump
-at the speed its neighbours allow. The axes' accelerations step at the knots, so a machine with a jerk
-limit is planned with ``sync`` instead; the first point is reached from rest (a straight move from the
-start) and the last is left at rest. Caps: each axis ``min(v_max, feed / √3)``, so the path speed stays
-within the feed.
+Speed caps (path speed, Euclidean, made linear as a per-axis box whose diagonal is the cap,
+:func:`path_caps`): at a pulse the beam burns, so the path speed there is within the feed (each axis
+``feed/√3``); between pulses the beam is dark, so the rapid applies, shared among the axes by the gap's
+direction; every axis within its ``v_max``. The speed is piecewise linear in time, so these hold on the
+whole gap. The axes' accelerations step at the knots, so a machine with a jerk limit is planned with
+``sync`` instead; the first point is reached from rest (a straight move from the start) and the last is
+left at rest.
 """
 
 from __future__ import annotations
+
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -67,12 +75,14 @@ def candidates(lo: np.ndarray, window: PulseWindow) -> np.ndarray:
     return np.sort(np.concatenate(cols, axis=1), axis=1)
 
 
-def _rows(D, h, A, cap, cruise):
+def _rows(D, h, A, cap_mid, cap_knot, cruise):
     """The gap's linear conditions ``l <= α v0 + β v1 <= u``: four rows, last axis ``(..., 4)``.
 
     Two phases (``cruise`` false; halves at ``a1``, ``a2``): ``a1 h = 4m − 3v0 − v1``, ``a2 h = −4m + v0 + 3v1``,
     mid speed ``2m − (v0 + v1)/2`` (``m = D/h``). Three (quarter at ``a1``, half cruising at ``v_c``, quarter
-    at ``a3``): ``v_c = 4m/3 − (v0 + v1)/6``, ``a1 h/4 = v_c − v0``, ``a3 h/4 = v1 − v_c``.
+    at ``a3``): ``v_c = 4m/3 − (v0 + v1)/6``, ``a1 h/4 = v_c − v0``, ``a3 h/4 = v1 − v_c``. The speed is
+    piecewise linear, so its extremes are at the knots (``|v1| <= cap_knot``, the last row) and the middle
+    (``|v_c| <= cap_mid``).
     """
     m = D / h
     Ah = A * h
@@ -82,13 +92,13 @@ def _rows(D, h, A, cap, cruise):
     beta = jnp.stack([one, p, one, one], axis=-1)
     c = jnp.where(cruise, 8.0 * m, 4.0 * m)
     acc = jnp.where(cruise, 1.5 * Ah, Ah)
-    vel = jnp.where(cruise, 6.0 * cap, 2.0 * cap)
-    lo = jnp.stack([c - acc, c - acc, c - vel, -cap * one], axis=-1)
-    hi = jnp.stack([c + acc, c + acc, c + vel, cap * one], axis=-1)
+    vel = jnp.where(cruise, 6.0 * cap_mid, 2.0 * cap_mid)
+    lo = jnp.stack([c - acc, c - acc, c - vel, -cap_knot * one], axis=-1)
+    hi = jnp.stack([c + acc, c + acc, c + vel, cap_knot * one], axis=-1)
     return alpha, beta, lo, hi
 
 
-def project(lo0, hi0, D, h, A, cap, cruise):
+def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise):
     """Speeds ``v1`` reachable from ``v0 ∈ [lo0, hi0]`` over a gap: ``(ok, L, U)``, broadcast.
 
     Upper limits on ``v1`` are ``(u_i − α_i v0)/β_i`` and lower ones ``(l_j − α_j v0)/β_j``, all
@@ -96,7 +106,7 @@ def project(lo0, hi0, D, h, A, cap, cruise):
     condition per pair). Over the feasible ``v0`` interval ``[a, b]`` the largest ``v1`` is at ``a``, the
     smallest at ``b``.
     """
-    alpha, beta, l, u = _rows(D, h, A, cap, cruise)
+    alpha, beta, l, u = _rows(D, h, A, cap_mid, cap_knot, cruise)
     s = alpha / beta
     # pair (i upper, j lower): v0 (s_j - s_i) >= l_j/β_j - u_i/β_i
     c = s[..., None, :] - s[..., :, None]  # (..., i, j)
@@ -114,59 +124,86 @@ def project(lo0, hi0, D, h, A, cap, cruise):
     return ok & (L <= U + 1e-12 * (1 + jnp.abs(U))), L, jnp.maximum(L, U)
 
 
-#: Gaps ahead a duration is checked against: the next gaps at their shortest candidates must still fit.
+#: Gaps ahead the first pass checks a duration against: the next gaps at their shortest candidates must fit.
 LOOKAHEAD = 2
+#: Passes after the first: each scans the other way and keeps every gap at most as long as before.
+PASSES = 4
+#: Tolerance on interval overlaps (mm/s).
+EPS_MM_S = 1e-9
 
 
-@jax.jit
-def forward(D, cand, last, cruise, A, cap, tick_hz):
-    """Forward scan over gaps: ``D`` ``(g, 3)``, ``cand`` ``(g, C)`` ticks, ``last`` ``(g,)`` bool.
+@partial(jax.jit, static_argnames=("lookahead",))
+def forward(D, cand, cruise, capm, capk, blo, bhi, A, tick_hz, lookahead=0):
+    """Forward scan over gaps: ``D`` ``(g, 3)``, ``cand`` ``(g, C)`` ticks, ``cruise`` ``(g,)``.
 
-    Each gap takes its shortest candidate after which the next :data:`LOOKAHEAD` gaps still fit at their
-    shortest candidates (else its shortest candidate that fits itself; else its longest).
-    Returns ``(ticks (g,), lo (g+1, 3), hi (g+1, 3), ok (g,))``: each gap's chosen tick count, the speed
-    interval at every knot (knot 0 at rest), and whether a candidate fitted.
+    ``capm`` ``(g, 3)`` caps each gap's mid speed, ``capk`` ``(g+1, 3)`` each knot's speed; ``blo``, ``bhi``
+    ``(g+1, 3)``: the speeds at each knot from which the rest can still be completed (the last knot: rest).
+    Each gap takes its shortest candidate whose reachable exit speeds meet that set on every axis (and,
+    with ``lookahead``, after which that many more gaps still fit at their shortest candidates); else its
+    shortest candidate that fits itself; else its longest. Returns ``(ticks (g,), lo (g+1, 3), hi (g+1, 3),
+    ok (g,))``: the chosen tick counts, the reachable (and completable) speed interval at every knot (knot
+    0 at rest), and whether a candidate met the set.
     """
     g = D.shape[0]
-    ahead_D = jnp.stack([jnp.roll(D, -k, axis=0) for k in range(1, LOOKAHEAD + 1)], axis=1)  # (g, L, 3)
-    ahead_c = jnp.stack([jnp.roll(cruise, -k, axis=0) for k in range(1, LOOKAHEAD + 1)], axis=1)
-    ahead_h = jnp.stack([jnp.roll(cand[:, 0], -k) for k in range(1, LOOKAHEAD + 1)], axis=1) / tick_hz
-    idx = jnp.arange(g)
-    ahead_real = jnp.stack([idx + k < g for k in range(1, LOOKAHEAD + 1)], axis=1)
-    ahead_real &= jnp.cumsum(jnp.stack([jnp.roll(last, -k) for k in range(0, LOOKAHEAD)], axis=1), axis=1) == 0
+    if lookahead:
+        ahead = [
+            jnp.stack([jnp.roll(x, -k, axis=0) for k in range(1, lookahead + 1)], axis=1)
+            for x in (D, cruise, capm, capk[1:], cand[:, 0])
+        ]
+        real = jnp.stack([jnp.arange(g) + k < g for k in range(1, lookahead + 1)], axis=1)
+    else:
+        ahead = [jnp.zeros((g, 0, 3)), jnp.zeros((g, 0), bool), jnp.zeros((g, 0, 3)), jnp.zeros((g, 0, 3))]
+        ahead += [jnp.zeros((g, 0), cand.dtype)]
+        real = jnp.zeros((g, 0), bool)
 
     def step(state, x):
         lo0, hi0 = state
-        d, c, is_last, cr, ad, ac, ah, areal = x
+        d, c, cr, cm, ck, bl, bh, ad, ac, am, ak, ah, areal = x
         h = c.astype(jnp.float64)[:, None] / tick_hz  # (C, 1)
-        ok, L, U = project(lo0[None], hi0[None], d[None], h, A[None], cap[None], cr)  # (C, 3)
-        ok = ok & (~is_last | ((L <= 0.0) & (U >= 0.0)))
+        ok, L, U = project(lo0[None], hi0[None], d[None], h, A[None], cm[None], ck[None], cr)  # (C, 3)
+        L, U = jnp.maximum(L, bl[None]), jnp.minimum(U, bh[None])
+        good = jnp.all(ok & (L <= U + EPS_MM_S), axis=1)
         fit = jnp.all(ok, axis=1)
-        good, lk, uk = fit, L, U
-        for k in range(LOOKAHEAD):
-            okk, lk, uk = project(lk, uk, ad[k][None], ah[k], A[None], cap[None], ac[k])
+        lk, uk = L, U
+        for k in range(lookahead):
+            hk = ah[k].astype(jnp.float64) / tick_hz
+            okk, lk, uk = project(lk, uk, ad[k][None], hk, A[None], am[k][None], ak[k][None], ac[k])
             good = good & (~areal[k] | jnp.all(okk, axis=1))
         k = jnp.where(jnp.any(good), jnp.argmax(good), jnp.where(jnp.any(fit), jnp.argmax(fit), c.shape[0] - 1))
-        L, U = L[k], U[k]
-        L = jnp.where(is_last, 0.0, L)
-        U = jnp.where(is_last, 0.0, U)
-        return (L, U), (c[k], L, U, jnp.any(fit))
+        L, U = L[k], jnp.maximum(L[k], U[k])
+        return (L, U), (c[k], L, U, good[k])
 
     z = jnp.zeros(D.shape[1])
-    _, (ticks, L, U, ok) = jax.lax.scan(step, (z, z), (D, cand, last, cruise, ahead_D, ahead_c, ahead_h, ahead_real))
+    xs = (D, cand, cruise, capm, capk[1:], blo[1:], bhi[1:], *ahead, real)
+    _, (ticks, L, U, ok) = jax.lax.scan(step, (z, z), xs)
     return ticks, jnp.concatenate([z[None], L]), jnp.concatenate([z[None], U]), ok
 
 
 @jax.jit
-def backward(D, ticks, cruise, lo, hi, A, cap, tick_hz):
+def reachable(D, ticks, cruise, capm, capk, A, tick_hz):
+    """Speeds reachable from rest at every knot ``(g+1, 3)`` (lo, hi) with the tick counts fixed; and ``ok``."""
+
+    def step(state, x):
+        lo0, hi0 = state
+        d, t, cr, cm, ck = x
+        ok, L, U = project(lo0, hi0, d, t.astype(jnp.float64) / tick_hz, A, cm, ck, cr)
+        return (L, U), (L, U, jnp.all(ok))
+
+    z = jnp.zeros(D.shape[1])
+    _, (L, U, ok) = jax.lax.scan(step, (z, z), (D, ticks, cruise, capm, capk[1:]))
+    return jnp.concatenate([z[None], L]), jnp.concatenate([z[None], U]), ok
+
+
+@jax.jit
+def backward(D, ticks, cruise, capm, capk, lo, hi, A, tick_hz):
     """Backward scan: each knot's speed ``(g+1, 3)`` inside its interval and fitting the gap after it."""
     h = ticks.astype(jnp.float64)[:, None] / tick_hz
     mean = D / h
     pref = jnp.concatenate([jnp.zeros((1, D.shape[1])), 0.5 * (mean[:-1] + mean[1:]), jnp.zeros((1, D.shape[1]))])
 
     def step(v1, x):
-        d, hh, cr, l0, h0, p = x
-        alpha, beta, l, u = _rows(d, hh, A, cap, cr)
+        d, hh, cr, cm, ck, l0, h0, p = x
+        alpha, beta, l, u = _rows(d, hh, A, cm, ck, cr)
         lo_v0 = jnp.max((l[:, :3] - beta[:, :3] * v1[:, None]) / alpha[:, :3], axis=1)
         hi_v0 = jnp.min((u[:, :3] - beta[:, :3] * v1[:, None]) / alpha[:, :3], axis=1)
         a, b = jnp.maximum(l0, lo_v0), jnp.minimum(h0, hi_v0)
@@ -174,8 +211,27 @@ def backward(D, ticks, cruise, lo, hi, A, cap, tick_hz):
         return v0, v0
 
     v_end = jnp.clip(pref[-1], lo[-1], hi[-1])
-    _, v = jax.lax.scan(step, v_end, (D, h, cruise, lo[:-1], hi[:-1], pref[:-1]), reverse=True)
+    xs = (D, h, cruise, capm, capk[1:], lo[:-1], hi[:-1], pref[:-1])
+    _, v = jax.lax.scan(step, v_end, xs, reverse=True)
     return jnp.concatenate([v, v_end[None]])
+
+
+#: Floor on an axis' share of a path-speed cap (see :func:`path_caps`).
+CAP_FLOOR = 0.05
+
+
+def path_caps(direction: np.ndarray, path_mm_s: float, v_max: np.ndarray, floor: float = CAP_FLOOR) -> np.ndarray:
+    """Per-axis speed caps ``(k, 3)`` whose box keeps the path speed within ``path_mm_s``.
+
+    ``direction`` ``(k, 3)`` (any length): each axis gets the share ``w_i = sqrt((u_i² + δ)/(1 + n δ))`` of
+    the cap (``u`` the unit direction, ``δ`` = :data:`CAP_FLOOR`, ``n`` axes), so ``Σ w_i² = 1`` and any
+    velocity inside the box ``|v_i| <= w_i path`` has a path speed ``<= path``; each axis also ``<= v_max``.
+    """
+    n = direction.shape[1]
+    norm = np.linalg.norm(direction, axis=1, keepdims=True)
+    u2 = np.where(norm > 0, direction / np.where(norm > 0, norm, 1.0), 1.0 / np.sqrt(n)) ** 2
+    w = np.sqrt((u2 + floor) / (1.0 + n * floor))
+    return np.minimum(w * path_mm_s, v_max[None])
 
 
 def _pad(a: np.ndarray, size: int, fill) -> np.ndarray:
@@ -185,9 +241,56 @@ def _pad(a: np.ndarray, size: int, fill) -> np.ndarray:
     return out
 
 
+class _Gaps:
+    """The gaps' data in one direction of travel (reversed: the points backwards, speeds negated), padded."""
+
+    def __init__(self, D, cruise, capm, capk, size, reverse):
+        if reverse:
+            D, cruise, capm, capk = -D[::-1], cruise[::-1], capm[::-1], capk[::-1]
+        self.g, self.size, self.reverse = D.shape[0], size, reverse
+        self.D = _pad(D, size, 0.0)
+        self.cruise = _pad(cruise, size, False)
+        self.capm = _pad(capm, size, 1.0)
+        self.capk = _pad(capk, size + 1, 1.0)
+
+    def orient(self, a: np.ndarray, fill) -> np.ndarray:
+        """Per-gap (or per-knot) array in this direction, padded."""
+        return _pad(a[::-1] if self.reverse else a, self.size + (a.shape[0] - self.g), fill)
+
+    def reachable(self, ticks: np.ndarray, A, f):
+        """``(lo, hi, ok)``: the speeds reachable from rest at each knot, in this direction (unpadded)."""
+        lo, hi, ok = reachable(self.D, self.orient(ticks, 1), self.cruise, self.capm, self.capk, A, f)
+        g = self.g
+        return np.array(lo)[: g + 1], np.array(hi)[: g + 1], bool(np.all(np.asarray(ok)[:g]))
+
+
+def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
+    """One greedy sweep in ``gaps``' direction; with ``prev`` ticks, every gap at most as long as in ``prev``.
+
+    The speeds from which the rest can be completed are those reachable, the other way, from the far
+    end's rest with ``prev``'s durations: the sweep never boxes itself in, and ``prev`` is always a choice.
+    """
+    g, size = gaps.g, gaps.size
+    if prev is None:
+        blo = np.full((g + 1, 3), -np.inf)
+        bhi = np.full((g + 1, 3), np.inf)
+        blo[-1] = bhi[-1] = 0.0
+        col = cand[:, :1]
+    else:
+        lo, hi, _ = other.reachable(prev, A, f)  # in the other direction: negate and reverse
+        blo, bhi = -hi[::-1], -lo[::-1]
+        col = prev[:, None]
+    c = np.sort(np.concatenate([cand, col], axis=1), axis=1)
+    c = gaps.orient(c, n_min)
+    knots = (_pad(blo, size + 1, 0.0), _pad(bhi, size + 1, 0.0))
+    ticks, _, _, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, lookahead=lookahead)
+    ticks = np.asarray(ticks, np.int64)[:g]
+    return ticks[::-1] if gaps.reverse else ticks
+
+
 @register_pulse_planner("bang")
 def plan_bang(req: PulseRequest) -> PulsePlan:
-    """Plan with C¹ cubic Hermite pieces and knot speeds from interval propagation (module docstring)."""
+    """Plan with constant-acceleration pieces and knot speeds from interval propagation (module docstring)."""
     from jaxcnc.planners.pulsed.sync import plan_sync
 
     w, f = req.window, req.tick_hz
@@ -196,29 +299,39 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     if n < 2 or np.any(np.isfinite(req.j_max)):
         return plan_sync(req)  # acceleration steps at the knots need an unlimited jerk
     A = np.asarray(req.a_max, dtype=np.float64)
-    cap = np.minimum(np.asarray(req.v_max, dtype=np.float64), req.feed_mm_s / np.sqrt(3.0))
+    V = np.asarray(req.v_max, dtype=np.float64)
     D = np.diff(pts, axis=0)
     g = D.shape[0]
-    lo_ticks = np.maximum(np.ceil(np.max(np.abs(D) / cap, axis=1) * f), w.n_min)
+    # dark between pulses: the path speed within the rapid; at a pulse (burning) within the feed
+    capm = path_caps(D, req.rapid_mm_s, V)
+    capk = np.broadcast_to(np.minimum(req.feed_mm_s / np.sqrt(D.shape[1]), V), (g + 1, D.shape[1]))
+    lo_ticks = np.maximum(np.ceil(np.max(np.abs(D) / capm, axis=1) * f), w.n_min)
     cand = candidates(lo_ticks, w)
     # long jumps (a triangle from rest at A would pass the cap) cruise through their middle half
-    cruise = np.any(np.abs(D) >= cap * cap / A, axis=1)
+    cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
     size = bucket_size(g)
-    last = np.zeros(size, bool)
-    last[g - 1] = True
-    # padding gaps: no motion, any candidate fits
-    Dp = _pad(D, size, 0.0)
-    cp = _pad(cand, size, w.n_min)
-    ticks, lo, hi, ok = forward(Dp, cp, last, _pad(cruise, size, False), A, cap, np.float64(f))
-    ticks, lo, hi = ticks[:g], lo[: g + 1], hi[: g + 1]
-    if not bool(np.all(np.asarray(ok)[:g])):
+    fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
+    bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
+    ticks = _sweep(fwd, bwd, cand, None, A, f, w.n_min, lookahead=LOOKAHEAD)
+    lo, hi, ok = fwd.reachable(ticks, A, f)
+    if not (ok and np.all(lo[-1] <= EPS_MM_S) and np.all(hi[-1] >= -EPS_MM_S)):
         return plan_sync(req)
-    v = np.asarray(backward(jnp.asarray(D), ticks, jnp.asarray(cruise), lo, hi, A, cap, np.float64(f)))
-    ticks = np.asarray(ticks, np.int64)
+    passes = [int(ticks.sum())]
+    for p in range(PASSES):
+        gaps, other = (bwd, fwd) if p % 2 == 0 else (fwd, bwd)
+        new = _sweep(gaps, other, cand, ticks, A, f, w.n_min)
+        new = np.minimum(new, ticks)  # never longer (a rounding slip keeps the previous gap)
+        lo2, hi2, ok2 = fwd.reachable(new, A, f)
+        if not (ok2 and np.all(lo2[-1] <= EPS_MM_S) and np.all(hi2[-1] >= -EPS_MM_S)) or new.sum() >= ticks.sum():
+            break
+        ticks, lo, hi = new, lo2, hi2
+        passes.append(int(ticks.sum()))
+    lo[-1] = hi[-1] = 0.0
+    v = np.asarray(backward(D, ticks, cruise, capm, capk, lo, hi, A, np.float64(f)))
     # the approach: rest to rest from the start to the first point, the first pulse on the next whole tick
-    u, length, vp, a, t = rest_to_rest(req, req.home[None], pts[:1], np.array([req.rapid_mm_s]))
+    ua, length, vp, a, t = rest_to_rest(req, req.home[None], pts[:1], np.array([req.rapid_mm_s]))
     z = np.zeros(1)
-    a_starts, a_coeffs, arrive = move_pieces(z, req.home[None], u, z, vp, z, length, a, f)
+    a_starts, a_coeffs, arrive = move_pieces(z, req.home[None], ua, z, vp, z, length, a, f)
     first = int(np.ceil(float(arrive[0]) - 1e-9))
     work = first + np.concatenate([[0], np.cumsum(ticks)])
     h = (ticks / f)[:, None]
@@ -242,7 +355,11 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     idle = w.split(work[:-1], ticks, m if w.idle_pulses else np.ones_like(ticks))
     traj = Trajectory(start_tick=starts, coeffs=coeffs, n_ticks=int(work[-1]), tick_hz=f)
     return PulsePlan(
-        trajectory=traj, work_tick=work, idle_tick=idle, planner="bang", stats={"idle_pulses": int(idle.shape[0])}
+        trajectory=traj,
+        work_tick=work,
+        idle_tick=idle,
+        planner="bang",
+        stats={"idle_pulses": int(idle.shape[0]), "pass_ticks": passes},
     )
 
 
