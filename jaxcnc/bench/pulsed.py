@@ -10,7 +10,7 @@ times (first to last work pulse), the lower bound (intervals × shortest allowed
 reductions, beside the documents' own figures. ``check=True`` also writes every table and
 verifies limits at every tick, every pulse interval and every hit.
 
-A second table (:func:`run_hard_cases`) runs ``sync`` on the hard-case clouds of
+A second table (:func:`run_hard_cases`) runs ``sync`` and ``bang`` on the hard-case clouds of
 :mod:`jaxcnc.io.clouds` (holes, short rows, misaligned rows, sparse, 3-D text, and points inside a
 real STL of the corpus) against the travel-aware lower bound ``LBt``
 (:mod:`jaxcnc.planners.pulsed.bound`).
@@ -175,37 +175,45 @@ def hard_case_clouds() -> dict[str, np.ndarray]:
 
 
 def run_hard_cases(check: bool = False) -> list[dict]:
-    """``sync`` on each hard-case cloud against both lower bounds; print and return the rows."""
+    """``sync`` and ``bang`` on each hard-case cloud against both lower bounds; print and return the rows."""
     machine = glass_engraver()
-    print("hard cases: sync against LB (intervals x shortest period) and LBt (travel-aware, certified)")
+    print("hard cases: sync and bang against LB (intervals x shortest period) and LBt (travel-aware, certified)")
     head = (
-        f"{'cloud':>13} {'points':>7} | {'sync s':>8} {'LB s':>8} {'LBt s':>8} {'sync/LB':>7} {'sync/LBt':>8} "
-        f"{'idle':>6} | {'plan s':>6}"
+        f"{'cloud':>13} {'points':>7} | {'sync s':>8} {'bang s':>8} {'LB s':>8} {'LBt s':>8} {'sync/LBt':>8} "
+        f"{'bang/LBt':>8} {'idle s/b':>11} | {'plan s/b':>11}"
     )
     print(head)
     print("-" * len(head))
     rows = []
     for name, pts in hard_case_clouds().items():
         job = PointJob(pts, None, np.arange(1, len(pts) + 1), name)
-        t0 = time.perf_counter()
-        planned = plan_points(job, machine, "sync")
-        wall = time.perf_counter() - t0
-        sync, lb, lbt = planned.plan.burn_time_s, planned.lower_bound_s, planned.lower_bound_travel_s
+        planned, wall = {}, {}
+        for planner in ("sync", "bang"):
+            t0 = time.perf_counter()
+            planned[planner] = plan_points(job, machine, planner)
+            wall[planner] = time.perf_counter() - t0
+        sync, bang = (planned[k].plan.burn_time_s for k in ("sync", "bang"))
+        lb, lbt = planned["sync"].lower_bound_s, planned["sync"].lower_bound_travel_s
+        idle = {k: v.plan.stats["idle_pulses"] for k, v in planned.items()}
         row = {
             "cloud": name,
             "n_points": len(pts),
             "sync_s": sync,
+            "bang_s": bang,
             "lower_bound_s": lb,
             "lower_bound_travel_s": lbt,
-            "sync_idle_pulses": planned.plan.stats["idle_pulses"],
-            "sync_plan_wall_s": wall,
+            "sync_idle_pulses": idle["sync"],
+            "bang_idle_pulses": idle["bang"],
+            "sync_plan_wall_s": wall["sync"],
+            "bang_plan_wall_s": wall["bang"],
         }
         if check:
-            row["check"] = _check_tables({"sync": planned}, machine)
+            row["check"] = _check_tables(planned, machine)
         rows.append(row)
         print(
-            f"{name:>13} {len(pts):>7} | {sync:>8.1f} {lb:>8.1f} {lbt:>8.1f} {sync / lb:>7.4f} {sync / lbt:>8.4f} "
-            f"{row['sync_idle_pulses']:>6} | {wall:>6.2f}" + (f"  {row['check']}" if check else "")
+            f"{name:>13} {len(pts):>7} | {sync:>8.1f} {bang:>8.1f} {lb:>8.1f} {lbt:>8.1f} {sync / lbt:>8.4f} "
+            f"{bang / lbt:>8.4f} {idle['sync']:>5}/{idle['bang']:<5} | {wall['sync']:>5.2f}/{wall['bang']:<5.2f}"
+            + (f"  {row['check']}" if check else "")
         )
     return rows
 

@@ -127,7 +127,9 @@ def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise):
 #: Gaps ahead the first pass checks a duration against: the next gaps at their shortest candidates must fit.
 LOOKAHEAD = 2
 #: Passes after the first: each scans the other way and keeps every gap at most as long as before.
-PASSES = 4
+PASSES = 1
+#: Scan steps unrolled together (fewer loop round trips on a CPU).
+UNROLL = 1
 #: Tolerance on interval overlaps (mm/s).
 EPS_MM_S = 1e-9
 
@@ -156,9 +158,9 @@ def forward(D, cand, cruise, capm, capk, blo, bhi, A, tick_hz, lookahead=0):
         ahead += [jnp.zeros((g, 0), cand.dtype)]
         real = jnp.zeros((g, 0), bool)
 
-    def step(state, x):
-        lo0, hi0 = state
-        d, c, cr, cm, ck, bl, bh, ad, ac, am, ak, ah, areal = x
+    def choose(lo0, hi0, x, c):
+        """The first good candidate among ``c`` ``(C,)``: ``(found, tick, L, U, fit)``."""
+        d, _, cr, cm, ck, bl, bh, ad, ac, am, ak, ah, areal = x
         h = c.astype(jnp.float64)[:, None] / tick_hz  # (C, 1)
         ok, L, U = project(lo0[None], hi0[None], d[None], h, A[None], cm[None], ck[None], cr)  # (C, 3)
         L, U = jnp.maximum(L, bl[None]), jnp.minimum(U, bh[None])
@@ -170,12 +172,19 @@ def forward(D, cand, cruise, capm, capk, blo, bhi, A, tick_hz, lookahead=0):
             okk, lk, uk = project(lk, uk, ad[k][None], hk, A[None], am[k][None], ak[k][None], ac[k])
             good = good & (~areal[k] | jnp.all(okk, axis=1))
         k = jnp.where(jnp.any(good), jnp.argmax(good), jnp.where(jnp.any(fit), jnp.argmax(fit), c.shape[0] - 1))
-        L, U = L[k], jnp.maximum(L[k], U[k])
-        return (L, U), (c[k], L, U, good[k])
+        return good[k], c[k], L[k], jnp.maximum(L[k], U[k])
+
+    def step(state, x):
+        lo0, hi0 = state
+        c = x[1]
+        # most gaps take their shortest candidate: try it alone, search the others only where it fails
+        first = choose(lo0, hi0, x, c[:1])
+        good, tick, L, U = jax.lax.cond(first[0], lambda: first, lambda: choose(lo0, hi0, x, c))
+        return (L, U), (tick, L, U, good)
 
     z = jnp.zeros(D.shape[1])
     xs = (D, cand, cruise, capm, capk[1:], blo[1:], bhi[1:], *ahead, real)
-    _, (ticks, L, U, ok) = jax.lax.scan(step, (z, z), xs)
+    _, (ticks, L, U, ok) = jax.lax.scan(step, (z, z), xs, unroll=UNROLL)
     return ticks, jnp.concatenate([z[None], L]), jnp.concatenate([z[None], U]), ok
 
 
@@ -285,7 +294,7 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
     knots = (_pad(blo, size + 1, 0.0), _pad(bhi, size + 1, 0.0))
     ticks, _, _, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, lookahead=lookahead)
     ticks = np.asarray(ticks, np.int64)[:g]
-    return ticks[::-1] if gaps.reverse else ticks
+    return (ticks[::-1] if gaps.reverse else ticks), bool(np.all(np.asarray(ok)[:g]))
 
 
 @register_pulse_planner("bang")
@@ -312,20 +321,22 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     size = bucket_size(g)
     fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
     bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
-    ticks = _sweep(fwd, bwd, cand, None, A, f, w.n_min, lookahead=LOOKAHEAD)
-    lo, hi, ok = fwd.reachable(ticks, A, f)
-    if not (ok and np.all(lo[-1] <= EPS_MM_S) and np.all(hi[-1] >= -EPS_MM_S)):
-        return plan_sync(req)
-    passes = [int(ticks.sum())]
+    ticks, _ = _sweep(fwd, bwd, cand, None, A, f, w.n_min, lookahead=LOOKAHEAD)
+    tried = [ticks]
     for p in range(PASSES):
         gaps, other = (bwd, fwd) if p % 2 == 0 else (fwd, bwd)
-        new = _sweep(gaps, other, cand, ticks, A, f, w.n_min)
-        new = np.minimum(new, ticks)  # never longer (a rounding slip keeps the previous gap)
-        lo2, hi2, ok2 = fwd.reachable(new, A, f)
-        if not (ok2 and np.all(lo2[-1] <= EPS_MM_S) and np.all(hi2[-1] >= -EPS_MM_S)) or new.sum() >= ticks.sum():
+        new, good = _sweep(gaps, other, cand, ticks, A, f, w.n_min)
+        if not good or new.sum() >= ticks.sum():
             break
-        ticks, lo, hi = new, lo2, hi2
-        passes.append(int(ticks.sum()))
+        ticks = np.minimum(new, ticks)
+        tried.append(ticks)
+    for ticks in tried[::-1]:  # the shortest whose speeds check out (the last, barring a rounding slip)
+        lo, hi, ok = fwd.reachable(ticks, A, f)
+        if ok and np.all(lo[-1] <= EPS_MM_S) and np.all(hi[-1] >= -EPS_MM_S):
+            break
+    else:
+        return plan_sync(req)
+    passes = [int(t.sum()) for t in tried]
     lo[-1] = hi[-1] = 0.0
     v = np.asarray(backward(D, ticks, cruise, capm, capk, lo, hi, A, np.float64(f)))
     # the approach: rest to rest from the start to the first point, the first pulse on the next whole tick
