@@ -920,7 +920,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--output", "-o", required=True, help="output folder")
     sp.add_argument("--workers", type=int, help="local Dask workers (default: one per core; 0: no Dask)")
     sp.add_argument("--scheduler", help="tcp://HOST:PORT of a running Dask scheduler (workers must see OUTPUT)")
-    sp.add_argument("--chunk", type=int, default=4, help="layers per task (default: %(default)s)")
+    sp.add_argument("--chunk", type=int, help="layers per task (default: about 6 tasks per worker, so loads even out)")
     sp.add_argument(
         "--cli", choices=("binary", "ascii", "none"), default="binary", help="CLI export (default: %(default)s)"
     )

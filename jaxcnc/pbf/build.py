@@ -221,7 +221,7 @@ def build(
     out_dir: str | Path,
     workers: int | None = None,
     scheduler: str | None = None,
-    chunk: int = 4,
+    chunk: int | None = None,
     cli: str = "binary",
     pictures: int = 4,
     progress: Callable[[int, int], None] | None = None,
@@ -235,8 +235,10 @@ def build(
         workers: 0 computes here, serially; ``None`` (default) a local Dask cluster with one worker process per
             core; n a local cluster of n. scheduler: ``tcp://HOST:PORT`` of a running Dask scheduler (then
             ``out_dir`` must be reachable by the workers at the same path).
-        chunk: layers per task. cli: ``binary``, ``ascii`` or ``none``. pictures: how many layers to draw, spread
-            over the height (0: none; -1: all).
+        chunk: layers per task (default: :func:`jaxcnc.pbf.distributed.auto_chunk` — about
+            :data:`~jaxcnc.pbf.distributed.TASKS_PER_WORKER` tasks per worker; 8 computing here).
+        cli: ``binary``, ``ascii`` or ``none``. pictures: how many layers to draw, spread over the height (0: none;
+            -1: all).
         progress: called with (layers done, layers total) as layers finish.
         layers: only these layer indices (the manifest is then incomplete and no CLI is written).
     """
@@ -292,14 +294,15 @@ def build(
             write_manifest(out, manifest)
             last_write = time.monotonic()
 
-    jobs = chunks_of(todo, max(1, chunk))
+    if chunk is not None and chunk < 1:
+        raise BuildError(f"chunk {chunk}: a task holds at least one layer")
     if workers == 0 and scheduler is None:
-        for job in jobs:
+        for job in chunks_of(todo, chunk or 8):
             record(run_chunk(mesh.vertices, mesh.faces, z_all, job, params, str(out), cli))
-    elif jobs:
+    elif todo:
         from jaxcnc.pbf.distributed import run_on_dask
 
-        run_on_dask(mesh.vertices, mesh.faces, z_all, jobs, params, str(out), record, workers, scheduler, cli)
+        run_on_dask(mesh.vertices, mesh.faces, z_all, todo, chunk, params, str(out), record, workers, scheduler, cli)
     complete = all(k in manifest["layers"] for k in range(len(z_all)))
     manifest["complete"] = complete
     recs = sorted(manifest["layers"].values(), key=lambda r: r["index"])

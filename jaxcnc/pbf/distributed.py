@@ -31,11 +31,22 @@ def local_cluster(workers: int | None = None):
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
 
 
+#: Tasks per worker when the chunk size is automatic: enough that the last tasks even out the workers' loads,
+#: few enough that the scheduler's cost per task (milliseconds, on the same cores) stays small beside a task.
+TASKS_PER_WORKER = 6
+
+
+def auto_chunk(n_layers: int, n_workers: int) -> int:
+    """Layers per task for ``n_layers`` on ``n_workers``: about :data:`TASKS_PER_WORKER` tasks each."""
+    return max(1, -(-n_layers // (TASKS_PER_WORKER * max(1, n_workers))))
+
+
 def run_on_dask(
     vertices: np.ndarray,
     faces: np.ndarray,
     z_all_mm: np.ndarray,
-    jobs: list[list[int]],
+    layers: list[int],
+    chunk: int | None,
     params: BuildParams,
     out: str,
     record: Callable[[tuple[list[dict], dict[int, bytes]]], None],
@@ -43,11 +54,12 @@ def run_on_dask(
     scheduler: str | None = None,
     cli: str = "none",
 ) -> None:
-    """Run :func:`jaxcnc.pbf.build.run_chunk` for every job; call ``record`` with each job's result (its records
-    and its layers' CLI bytes) as it ends."""
+    """Run :func:`jaxcnc.pbf.build.run_chunk` on ``layers`` in tasks of ``chunk`` layers (``None``:
+    :func:`auto_chunk` for the cluster's workers); call ``record`` with each task's result (its records and its
+    layers' CLI bytes) as it ends."""
     from dask.distributed import Client, as_completed
 
-    from jaxcnc.pbf.build import run_chunk
+    from jaxcnc.pbf.build import chunks_of, run_chunk
 
     cluster = None
     if scheduler is None:
@@ -56,6 +68,9 @@ def run_on_dask(
     else:
         client = Client(scheduler)
     try:
+        if chunk is None:
+            chunk = auto_chunk(len(layers), len(client.scheduler_info().get("workers", {})))
+        jobs = chunks_of(layers, chunk)
         run = uuid.uuid4().hex[:8]
         v, f, z = client.scatter([vertices, faces, z_all_mm], broadcast=True)
         futures = [
