@@ -6,7 +6,9 @@ import numpy as np
 
 
 def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_000.0, 100_000.0)) -> dict:
-    """Play synthetic 3-axis tables of ``seconds`` into ``sim`` and into the TCP receiver process.
+    """Play synthetic 3-axis tables of ``seconds`` into ``sim`` and into the TCP receiver process, each rate
+    twice: positions only, and with a laser power channel (a value per tick, as every planned table has since
+    table format 2 — the stream then carries the power of every row too).
 
     Prints ticks/s and the multiple of real time, and the player's peak memory growth (the table is
     memory-mapped and streamed, so it stays far below the table's size).
@@ -25,15 +27,16 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
     out: dict = {}
     print(f"jaxcnc bench (player): {seconds:g} s 3-axis tables")
     with tempfile.TemporaryDirectory() as tmp:
-        for hz in rates:
+        for hz, lit in [(hz, lit) for hz in rates for lit in (False, True)]:
             n = int(seconds * hz)
-            path = Path(tmp) / f"t{int(hz)}.ticks"
-            with TableWriter(path, axes=["x", "y", "z"], tick_hz=hz, discrete_mm=0.001, n_rows=n) as w:
+            path = Path(tmp) / f"t{int(hz)}{'-power' if lit else ''}.ticks"
+            with TableWriter(path, axes=["x", "y", "z"], tick_hz=hz, discrete_mm=0.001, n_rows=n, power=lit) as w:
                 chunk = 1 << 20
                 for first in range(0, n, chunk):
                     k = np.arange(first, min(n, first + chunk))
                     p = np.stack([k % 100_000, (k // 7) % 50_000, np.zeros_like(k)], axis=1).astype(np.int32)
-                    w.write(p, np.zeros_like(p))
+                    power = ((k // 1000) % 2 * 0.5 + (k % 1000) / 2000.0).astype(np.float32) if lit else None
+                    w.write(p, np.zeros_like(p), power)
             size_mb = path.stat().st_size / 2**20
             table = TableFile(path)
             res = play(table, SimSink(buffer_rows=65536, keep=False), chunk_rows=65536)
@@ -52,8 +55,9 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
                     [sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True
                 ).stdout.split(),
             )
+            what = "with a power channel" if lit else "positions only"
             print(
-                f"  {hz / 1000:g} kHz, {n:,} rows ({size_mb:.0f} MB file): sim {n / res.wall_s:,.0f} ticks/s = "
+                f"  {hz / 1000:g} kHz, {what}, {n:,} rows ({size_mb:.0f} MB file): sim {n / res.wall_s:,.0f} ticks/s = "
                 f"{res.real_time_factor:,.0f}x real time; player process: {anon:.0f} MB anonymous memory "
                 f"(peak resident {hwm:.0f} MB incl. mapped file pages)"
             )
@@ -67,7 +71,7 @@ def run_player_benchmarks(seconds: float = 60.0, rates: tuple[float, ...] = (10_
                 f"    tcp receiver (loopback, other process): {n / res_tcp.wall_s:,.0f} ticks/s = "
                 f"{res_tcp.real_time_factor:,.1f}x real time"
             )
-            out[hz] = {
+            out[f"{hz:g}{'-power' if lit else ''}"] = {
                 "sim_ticks_s": n / res.wall_s,
                 "tcp_ticks_s": n / res_tcp.wall_s,
                 "anon_mb": anon,
