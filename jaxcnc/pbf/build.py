@@ -84,10 +84,12 @@ def run_chunk(
     params: BuildParams,
     out: str,
     cli: str = "none",
+    lists=None,
 ) -> tuple[list[dict], dict[int, bytes]]:
     """Compute and write the layers ``layers``; return their manifest records and, unless ``cli`` is ``"none"``,
     each layer's bytes of the CLI export (``"binary"`` or ``"ascii"``; the driver only joins them, so the export's
-    work is spread over the workers too). Runs on a worker or here."""
+    work is spread over the workers too). With ``lists`` (a :class:`jaxcnc.pbf.scanlist.ListTarget`) each
+    layer's board list is compiled and written beside its vector file. Runs on a worker or here."""
     from jaxcnc.pbf.cli_format import CLILayer, encode_layer, layer_blocks
     from jaxcnc.pbf.layer import process_chunk
     from jaxcnc.pbf.order import layer_time_s
@@ -115,6 +117,15 @@ def run_chunk(
                 zone_area_mm2=scan.zone_area_mm2,
             )
         )
+        if lists is not None:
+            from jaxcnc.pbf.scanlist import layer_list_bytes, list_name
+
+            blob = layer_list_bytes(scan.vectors, lists, scan.index, scan.z_mm)
+            atomic_write(folder / list_name(scan.index), blob)
+            records[-1]["list"] = dict(
+                file=f"{LAYER_DIR}/{list_name(scan.index)}", sha256=sha256_bytes(blob), bytes=len(blob),
+                target=lists.digest(),
+            )  # fmt: skip
     return records, parts
 
 
@@ -161,8 +172,14 @@ def write_manifest(out: Path, manifest: dict) -> None:
     atomic_write(out / MANIFEST, (json.dumps(m, indent=1, sort_keys=True) + "\n").encode())
 
 
-def _previous(out: Path, key: dict) -> dict[int, dict]:
-    """Layers of an earlier run of the same build whose files hold their checksums."""
+def _holds(out: Path, rec: dict) -> bool:
+    f = out / rec.get("file", "")
+    return f.is_file() and f.stat().st_size == rec.get("bytes") and sha256_file(f) == rec.get("sha256")
+
+
+def _previous(out: Path, key: dict, lists_digest: str | None = None) -> dict[int, dict]:
+    """Layers of an earlier run of the same build whose files hold their checksums (and, when lists are asked
+    for, whose board list was made for the same target and holds its checksum)."""
     path = out / MANIFEST
     if not path.is_file():
         return {}
@@ -177,9 +194,15 @@ def _previous(out: Path, key: dict) -> dict[int, dict]:
             raise BuildError(f"{path}: the folder holds another build ({k} differs); use another folder or remove it")
     keep = {}
     for rec in old.get("layers", []):
-        f = out / rec.get("file", "")
-        if f.is_file() and f.stat().st_size == rec.get("bytes") and sha256_file(f) == rec.get("sha256"):
-            keep[int(rec["index"])] = rec
+        if not _holds(out, rec):
+            continue
+        if lists_digest is not None:
+            li = rec.get("list")
+            if not isinstance(li, dict) or li.get("target") != lists_digest or not _holds(out, li):
+                continue
+        elif "list" in rec and not _holds(out, rec["list"]):
+            rec.pop("list")  # a damaged list of an earlier run: dropped (verify_build names its file)
+        keep[int(rec["index"])] = rec
     return keep
 
 
@@ -226,6 +249,7 @@ def build(
     pictures: int = 4,
     progress: Callable[[int, int], None] | None = None,
     layers: Iterable[int] | None = None,
+    lists=None,
 ) -> BuildResult:
     """Build a part: prepare the mesh, compute every layer not already done, write the manifest and exports.
 
@@ -241,6 +265,9 @@ def build(
             -1: all).
         progress: called with (layers done, layers total) as layers finish.
         layers: only these layer indices (the manifest is then incomplete and no CLI is written).
+        lists: a :class:`jaxcnc.pbf.scanlist.ListTarget` (from a scanner-only machine file,
+            :func:`jaxcnc.pbf.scanlist.list_target`): each layer's board list written beside its vector file
+            (``layers/L000042.jxv``), on the worker that computes the layer; ``None``: no lists.
     """
     from jaxcnc.pbf.mesh import prepare
     from jaxcnc.pbf.slice import layer_heights
@@ -254,7 +281,7 @@ def build(
     mesh = prepare(mesh_source, params.merge_tol_mm, params.repair, params.placement, params.plate_center_mm)
     z_all = layer_heights(float(mesh.bounds_mm[1, 2]), params.layer_thickness_mm)
     key = dict(format=FORMAT, mesh_sha256=mesh.digest, params_sha256=params.digest())
-    done = _previous(out, key)
+    done = _previous(out, key, None if lists is None else lists.digest())
     wanted = sorted(set(range(len(z_all))) if layers is None else {int(k) for k in layers if 0 <= k < len(z_all)})
     todo = [k for k in wanted if k not in done]
     manifest = dict(
@@ -298,11 +325,13 @@ def build(
         raise BuildError(f"chunk {chunk}: a task holds at least one layer")
     if workers == 0 and scheduler is None:
         for job in chunks_of(todo, chunk or 8):
-            record(run_chunk(mesh.vertices, mesh.faces, z_all, job, params, str(out), cli))
+            record(run_chunk(mesh.vertices, mesh.faces, z_all, job, params, str(out), cli, lists))
     elif todo:
         from jaxcnc.pbf.distributed import run_on_dask
 
-        run_on_dask(mesh.vertices, mesh.faces, z_all, todo, chunk, params, str(out), record, workers, scheduler, cli)
+        run_on_dask(
+            mesh.vertices, mesh.faces, z_all, todo, chunk, params, str(out), record, workers, scheduler, cli, lists
+        )
     complete = all(k in manifest["layers"] for k in range(len(z_all)))
     manifest["complete"] = complete
     recs = sorted(manifest["layers"].values(), key=lambda r: r["index"])
@@ -337,12 +366,15 @@ def verify_build(out_dir: str | Path) -> list[str]:
     problems = []
     listed = set()
     for rec in m["layers"]:
-        f = out / rec["file"]
-        listed.add(f.name)
-        if not f.is_file():
-            problems.append(f"{f}: missing")
-        elif sha256_file(f) != rec["sha256"]:
-            problems.append(f"{f}: checksum differs")
+        for r in (rec, rec.get("list")):
+            if r is None:
+                continue
+            f = out / r["file"]
+            listed.add(f.name)
+            if not f.is_file():
+                problems.append(f"{f}: missing")
+            elif sha256_file(f) != r["sha256"]:
+                problems.append(f"{f}: checksum differs")
     for f in (out / LAYER_DIR).iterdir():
         if f.name not in listed:
             problems.append(f"{f}: not in the manifest")

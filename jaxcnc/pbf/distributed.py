@@ -53,6 +53,7 @@ def run_on_dask(
     workers: int | None = None,
     scheduler: str | None = None,
     cli: str = "none",
+    lists=None,
 ) -> None:
     """Run :func:`jaxcnc.pbf.build.run_chunk` on ``layers`` in tasks of ``chunk`` layers (``None``:
     :func:`auto_chunk` for the cluster's workers); call ``record`` with each task's result (its records and its
@@ -74,7 +75,7 @@ def run_on_dask(
         run = uuid.uuid4().hex[:8]
         v, f, z = client.scatter([vertices, faces, z_all_mm], broadcast=True)
         futures = [
-            client.submit(run_chunk, v, f, z, job, params, out, cli, key=f"pbf-layers-{job[0]}-{job[-1]}-{run}")
+            client.submit(run_chunk, v, f, z, job, params, out, cli, lists, key=f"pbf-layers-{job[0]}-{job[-1]}-{run}")
             for job in jobs
         ]
         for fut in as_completed(futures):
