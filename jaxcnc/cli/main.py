@@ -492,6 +492,16 @@ def cmd_build(args: argparse.Namespace) -> int:
     params = load_params(args.machine)
     if args.repair:
         params = replace(params, repair=True)
+    ticks = _layer_range(args.ticks) if args.ticks else []
+    if (args.lists or ticks) and not args.galvo:
+        raise JaxcncError("--lists and --ticks need --galvo MACHINE (a scanner-only machine file with [galvo])")
+    target = None
+    if args.galvo:
+        from jaxcnc.pbf.scanlist import list_target
+
+        target = list_target(args.galvo, params)  # the machine file checked before the build: [galvo] needed
+    if not args.lists:
+        target = None
     bar = None if args.quiet else _progress_bar(desc="layers", unit="layer", total=0, leave=False)
 
     def progress(done: int, total: int) -> None:
@@ -502,7 +512,8 @@ def cmd_build(args: argparse.Namespace) -> int:
 
     try:
         res = build(args.input, params, args.output, workers=args.workers, scheduler=args.scheduler,
-                    chunk=args.chunk, cli=args.cli, pictures=args.pictures, progress=progress)  # fmt: skip
+                    chunk=args.chunk, cli=args.cli, pictures=args.pictures, progress=progress,
+                    lists=target)  # fmt: skip
     finally:
         if bar is not None:
             bar.close()
@@ -519,7 +530,29 @@ def cmd_build(args: argparse.Namespace) -> int:
             print(f"CLI ({args.cli}): {res.cli_file}")
         if res.pictures:
             print(f"pictures: {len(res.pictures)} in {res.pictures[0].parent}")
+        if target is not None:
+            print(f"board lists: {res.layers} in {res.out_dir / 'layers'} (L000000.jxv, ...) for {args.galvo}")
+    if ticks:
+        from jaxcnc.pbf.scanlist import layer_ticks
+
+        for k in ticks:
+            rep = layer_ticks(res.out_dir, k, args.galvo)
+            if not args.quiet:
+                print(f"layer {k}: {rep['table']}: {rep['n_ticks']} ticks ({rep['total_time_s']:.3f} s), verified")
     return 0
+
+
+def _layer_range(text: str) -> list[int]:
+    """``K`` or ``A-B`` (inclusive) as a list of layer indices; anything else is a usage error."""
+    a, sep, b = text.partition("-")
+    try:
+        lo = int(a)
+        hi = int(b) if sep else lo
+    except ValueError:
+        raise JaxcncError(f"--ticks {text!r}: expected a layer K or a range A-B") from None
+    if lo < 0 or hi < lo:
+        raise JaxcncError(f"--ticks {text!r}: expected 0 <= A <= B")
+    return list(range(lo, hi + 1))
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -926,6 +959,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sp.add_argument("--pictures", type=int, default=4, help="layers to draw (default: %(default)s; -1: all)")
     sp.add_argument("--repair", action="store_true", help="repair mesh defects instead of refusing the mesh")
+    sp.add_argument("--galvo", metavar="MACHINE", help="scanner-only machine file ([galvo]) for --lists and --ticks")
+    sp.add_argument("--lists", action="store_true", help="a galvo board list per layer (layers/L000042.jxv)")
+    sp.add_argument("--ticks", metavar="K|A-B", help="tick tables of these layers, planned on --galvo and verified")
     sp.add_argument("--quiet", "-q", action="store_true", help="no progress bar or summary")
     sp.set_defaults(func=cmd_build, needs=("trimesh", "pyclipper", "dask", "matplotlib"))
     return p
