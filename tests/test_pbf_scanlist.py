@@ -133,3 +133,29 @@ def test_lists_need_a_galvo_machine(tmp_path):
     m.write_text(GALVO_XY + GALVO_PATH)
     with pytest.raises(MachineFileError, match=r"plain\.toml: \[galvo\] machine 'galvo' has no \[galvo\] table"):
         list_target(m, default_params())
+
+
+def test_build_command_writes_lists_and_verified_tick_tables(tmp_path, capsys):
+    from jaxcnc.cli.main import main
+
+    (tmp_path / "g.toml").write_text(GALVO)
+    (tmp_path / "pbf.toml").write_text(
+        "[pbf]\nlayer_thickness_mm = 0.1\nhatch_spacing_mm = 0.1\nspot_diameter_mm = 0.08\n"
+    )
+    trimesh.creation.box(PART).export(tmp_path / "box.stl")
+    base = ["build", str(tmp_path / "box.stl"), "-m", str(tmp_path / "pbf.toml"), "--workers", "0", "--pictures", "0"]
+    out = tmp_path / "out"
+    assert main([*base, "-o", str(out), "--galvo", str(tmp_path / "g.toml"), "--lists", "--ticks", "1-2"]) == 0
+    text = capsys.readouterr().out
+    assert "board lists: 6" in text and "layer 2: " in text and "verified" in text
+    assert sorted(p.name for p in (out / "layers").glob("*.jxv")) == [f"L{k:06d}.jxv" for k in range(6)]
+    assert sorted(p.name for p in (out / "ticks").glob("*.ticks")) == ["L000001.ticks", "L000002.ticks"]
+    assert verify_build(out) == []
+    # a bad option or a machine without [galvo]: one line, exit 2, nothing built
+    assert main([*base, "-o", str(tmp_path / "o2"), "--ticks", "1"]) == 2
+    assert main([*base, "-o", str(tmp_path / "o2"), "--galvo", str(tmp_path / "g.toml"), "--ticks", "2x"]) == 2
+    assert main([*base, "-o", str(tmp_path / "o2"), "--galvo", str(tmp_path / "pbf.toml"), "--lists"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"jaxcnc: error: {tmp_path / 'pbf.toml'}:1: ")
+    assert "need --galvo MACHINE" in err[0] and "--ticks '2x'" in err[1]
+    assert not (tmp_path / "o2").exists()
