@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -378,6 +378,61 @@ def plan_file(
     )
 
 
+@dataclass
+class _Run:
+    """What :func:`_run_stages` did: the program read, what the planner made, the written table, what the
+    verification found, and the seconds of each stage."""
+
+    program: Program
+    planned: Any
+    table: TableFile
+    checked: Any
+    seconds: dict[str, float]
+
+    @property
+    def plan_wall_s(self) -> float:
+        """Parse, plan and ticks: what a user waits for before the table exists."""
+        return self.seconds["parse"] + self.seconds["plan"] + self.seconds["ticks"]
+
+
+def _run_stages(
+    input_path: str | Path,
+    machine: MachineConfig,
+    out: str | Path,
+    label: str,
+    progress: bool | None,
+    options: dict[str, Any],
+    bounds: JobBounds,
+    plan: Callable[[Program], Any],
+    size: Callable[[Any], tuple[int, float]],
+    write: Callable[[Any, Program], Any],
+    verify: Callable[[TableFile, Program], Any],
+) -> _Run:
+    """The way every contour job goes — parse, plan, ticks, verify — as timed stages under one progress bar:
+    the source read with ``options``; ``plan(program)``; the table's size (``size(planned)``: rows, seconds)
+    held to ``bounds`` before anything is written; ``write(planned, program)`` writes ``out``;
+    ``verify(table, program)`` checks it."""
+    from jaxcnc.format import TableFile
+
+    st = Stages(progress, label)
+    try:
+        with st.stage("parse"):
+            program = load_program(input_path, machine, input_options=options)
+            check_program_bounds(program, machine, bounds)
+        with st.stage("plan"):
+            planned = plan(program)
+            n_rows, total_s = size(planned)
+            check_planned_bounds(str(input_path), n_rows, total_s, machine, bounds)
+        with st.stage("ticks"):
+            write(planned, program)
+        with st.stage("verify"):
+            table = TableFile(out)
+            checked = verify(table, program)
+    finally:
+        st.close()
+    return _Run(program, planned, table, checked, dict(st.seconds))
+
+
 def plan_split_file(
     input_path: str | Path,
     machine: MachineConfig,
@@ -392,33 +447,23 @@ def plan_split_file(
 ) -> dict:
     """Split a contour job between stage and scanner (:mod:`jaxcnc.planners.split`), write and check its
     table (every axis' limits, the field, the tool point); the per-tick CSV and the picture on request."""
-    from jaxcnc.format import TableFile
     from jaxcnc.planners.split import plan_split
     from jaxcnc.ticks.split import check_split, kinematic_csv, plot_split, write_split_table
     from jaxcnc.ticks.verify import measure_table
 
-    st = Stages(progress, f"splitting {Path(input_path).name}")
     options = source_options(dialect, input_options)
-    try:
-        with st.stage("parse"):
-            program = load_program(input_path, machine, input_options=options)
-            check_program_bounds(program, machine, bounds)
-        with st.stage("plan"):
-            plan = plan_split(program, machine, method)
-            check_planned_bounds(str(input_path), plan.n_ticks, plan.total_time_s, machine, bounds)
-        with st.stage("ticks"):
-            write_split_table(plan, program, machine, out, source_options=options)
-        with st.stage("verify"):
-            table = TableFile(out)
-            meas = measure_table(table, machine)
-            chk = check_split(table, machine, program)
-    finally:
-        st.close()
+    run = _run_stages(
+        input_path, machine, out, f"splitting {Path(input_path).name}", progress, options, bounds,
+        plan=lambda program: plan_split(program, machine, method),
+        size=lambda plan: (plan.n_ticks, plan.total_time_s),
+        write=lambda plan, program: write_split_table(plan, program, machine, out, source_options=options),
+        verify=lambda table, program: (measure_table(table, machine), check_split(table, machine, program)),
+    )  # fmt: skip
+    plan, program, table, (meas, chk) = run.planned, run.program, run.table, run.checked
     if kinematics:
         kinematic_csv(plan, kinematics)
     if split_plot:
         plot_split(plan, machine, split_plot)
-    t = st.seconds
     return {
         "input": str(input_path),
         "machine": machine.name,
@@ -431,8 +476,8 @@ def plan_split_file(
         "tick_hz": machine.tick_hz,
         "path_length_mm": plan.path_length_mm,
         "feed_mm_s": plan.feed_mm_s,
-        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
-        "timings_s": dict(t),
+        "plan_wall_s": run.plan_wall_s,
+        "timings_s": run.seconds,
         **measured(meas),
         "max_path_deviation_mm": chk.max_tool_deviation_mm,
         "path_tolerance_mm": table.header.discrete_mm,
@@ -460,28 +505,18 @@ def plan_external_file(
     from jaxcnc.jaxconfig import configure_jax
 
     configure_jax()
-    from jaxcnc.format import TableFile
     from jaxcnc.ticks.external import check_external, plan_external, write_external_table
     from jaxcnc.ticks.verify import measure_table
 
-    st = Stages(progress, f"planning {Path(input_path).name}")
     options = source_options(dialect, input_options)
-    try:
-        with st.stage("parse"):
-            program = load_program(input_path, machine, input_options=options)
-            check_program_bounds(program, machine, bounds)
-        with st.stage("plan"):
-            plan = plan_external(program, machine, planner)
-            check_planned_bounds(str(input_path), plan.n_ticks, plan.total_time_s, machine, bounds)
-        with st.stage("ticks"):
-            write_external_table(plan, program, machine, out, source_options=options)
-        with st.stage("verify"):
-            table = TableFile(out)
-            meas = measure_table(table, machine)
-            chk = check_external(table, machine, program)
-    finally:
-        st.close()
-    t = st.seconds
+    run = _run_stages(
+        input_path, machine, out, f"planning {Path(input_path).name}", progress, options, bounds,
+        plan=lambda program: plan_external(program, machine, planner),
+        size=lambda plan: (plan.n_ticks, plan.total_time_s),
+        write=lambda plan, program: write_external_table(plan, program, machine, out, source_options=options),
+        verify=lambda table, program: (measure_table(table, machine), check_external(table, machine, program)),
+    )  # fmt: skip
+    plan, program, table, (meas, chk) = run.planned, run.program, run.table, run.checked
     return {
         "input": str(input_path),
         "machine": machine.name,
@@ -493,8 +528,8 @@ def plan_external_file(
         "tick_hz": machine.tick_hz,
         "path_length_mm": plan.path_length_mm,
         "sections": [[int(s.scanner), s.first_tick, s.last_tick] for s in plan.sections],
-        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
-        "timings_s": dict(t),
+        "plan_wall_s": run.plan_wall_s,
+        "timings_s": run.seconds,
         **measured(meas),
         "max_path_deviation_mm": chk.max_tool_deviation_mm,
         "path_tolerance_mm": machine.path.corner_tol_mm + table.header.discrete_mm,
@@ -529,7 +564,6 @@ def plan_program_file(
     from jaxcnc.jaxconfig import configure_jax
 
     configure_jax()  # float64 and the persistent compile cache
-    from jaxcnc.format import TableFile
     from jaxcnc.planners import plan_job
     from jaxcnc.planners.job import machine_planner
     from jaxcnc.ticks.deviation import path_deviation
@@ -537,24 +571,15 @@ def plan_program_file(
     from jaxcnc.ticks.verify import measure_table
 
     planner = planner or machine_planner(machine)
-    st = Stages(progress, f"planning {Path(input_path).name}")
     options = source_options(dialect, input_options)
-    try:
-        with st.stage("parse"):
-            program = load_program(input_path, machine, input_options=options)
-            check_program_bounds(program, machine, bounds)
-        with st.stage("plan"):
-            job = plan_job(program, machine, planner=planner)
-            check_planned_bounds(str(input_path), job.plan.n_ticks + 1, job.plan.total_time_s, machine, bounds)
-        with st.stage("ticks"):
-            write_table(job, out, progress=progress, planner=planner, source_options=options)
-        with st.stage("verify"):
-            table = TableFile(out)
-            meas = measure_table(table, machine)
-            path = path_deviation(table, machine, program)
-    finally:
-        st.close()
-    t = st.seconds
+    run = _run_stages(
+        input_path, machine, out, f"planning {Path(input_path).name}", progress, options, bounds,
+        plan=lambda program: plan_job(program, machine, planner=planner),
+        size=lambda job: (job.plan.n_ticks + 1, job.plan.total_time_s),
+        write=lambda job, _: write_table(job, out, progress=progress, planner=planner, source_options=options),
+        verify=lambda table, program: (measure_table(table, machine), path_deviation(table, machine, program)),
+    )  # fmt: skip
+    job, program, table, (meas, path) = run.planned, run.program, run.table, run.checked
     return {
         "input": str(input_path),
         "machine": machine.name,
@@ -566,8 +591,8 @@ def plan_program_file(
         "n_ticks": job.plan.n_ticks + 1,
         "tick_hz": machine.tick_hz,
         "path_length_mm": job.path_length_mm,
-        "plan_wall_s": t["parse"] + t["plan"] + t["ticks"],
-        "timings_s": dict(t),
+        "plan_wall_s": run.plan_wall_s,
+        "timings_s": run.seconds,
         **measured(meas),
         "max_path_deviation_mm": path.max_mm,
         "path_tolerance_mm": path.max_tol_mm,
@@ -605,7 +630,6 @@ def plan_dynamic_file(
     modes, simulate it (:func:`jaxcnc.dynamics.simulate.simulate_table`); the report. The source is read with
     ``input_options`` and ``bounds`` hold as for :func:`plan_file`."""
     from jaxcnc.dynamics.shaped import plan_dynamic, write_dynamic_table
-    from jaxcnc.format import TableFile
     from jaxcnc.jaxconfig import configure_jax
     from jaxcnc.ticks.deviation import path_deviation
     from jaxcnc.ticks.verify import measure_table
@@ -617,24 +641,19 @@ def plan_dynamic_file(
         name = front_end_for(input_path).name
         raise JaxcncError(f"{input_path}: shaping and speed bands apply to contour programs, not {name} points")
     opts = source_options(dialect, input_options)
-    st = Stages(progress, f"planning {input_path.name} (shaped)")
-    try:
-        with st.stage("parse"):
-            program = load_program(input_path, machine, input_options=opts)
-            check_program_bounds(program, machine, bounds)
-        with st.stage("plan"):
-            dp = plan_dynamic(program, machine, shaper, **options)
-            n_rows = dp.sampler.n_rows
-            check_planned_bounds(str(input_path), n_rows, (n_rows - 1) / machine.tick_hz, machine, bounds)
-        with st.stage("ticks"):
-            write_dynamic_table(dp, program, out, progress, source_options=opts)
-        with st.stage("verify"):
-            table = TableFile(out)
-            meas = measure_table(table, machine)
-            path = path_deviation(table, machine, program)
-    finally:
-        st.close()
-    wall = st.seconds["parse"] + st.seconds["plan"] + st.seconds["ticks"]
+
+    def size(dp) -> tuple[int, float]:
+        return dp.sampler.n_rows, (dp.sampler.n_rows - 1) / machine.tick_hz
+
+    run = _run_stages(
+        input_path, machine, out, f"planning {input_path.name} (shaped)", progress, opts, bounds,
+        plan=lambda program: plan_dynamic(program, machine, shaper, **options),
+        size=size,
+        write=lambda dp, program: write_dynamic_table(dp, program, out, progress, source_options=opts),
+        verify=lambda table, program: (measure_table(table, machine), path_deviation(table, machine, program)),
+    )  # fmt: skip
+    dp, program, table, (meas, path) = run.planned, run.program, run.table, run.checked
+    wall = run.plan_wall_s
     report = {
         "input": str(input_path),
         "machine": machine.name,
