@@ -278,7 +278,8 @@ def build(
     except OSError as exc:
         raise BuildError(f"{out}: cannot create the build folder: {exc.strerror or exc}") from None
     _clean_temporaries(out)
-    mesh = prepare(mesh_source, params.merge_tol_mm, params.repair, params.placement, params.plate_center_mm)
+    mesh = prepare(mesh_source, params.merge_tol_mm, params.repair, params.placement, params.plate_center_mm,
+                   check_thickness_mm=params.layer_thickness_mm)  # fmt: skip
     z_all = layer_heights(float(mesh.bounds_mm[1, 2]), params.layer_thickness_mm)
     key = dict(format=FORMAT, mesh_sha256=mesh.digest, params_sha256=params.digest())
     done = _previous(out, key, None if lists is None else lists.digest())

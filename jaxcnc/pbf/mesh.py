@@ -10,8 +10,9 @@ Defects found (each with a count and where the first one is):
 - inconsistent normals: an edge that both its faces run in the same direction (one face flipped);
 - inside-out: a closed mesh whose volume is negative (all normals point in).
 
-Self-intersections are not searched for (that needs a boolean kernel); slicing unions each layer's loops, so
-overlapping shells build as their union.
+- self-intersections, where slicing shows them (:mod:`jaxcnc.pbf.selfint`; with a layer thickness given): loops
+  of one cut crossing themselves or each other, at up to 64 of the build's layer heights. Repair builds each layer
+  from the union of its loops (non-zero rule), so overlapping shells build as their union.
 """
 
 from __future__ import annotations
@@ -226,6 +227,7 @@ def prepare(
     placement: str = "plate",
     plate_center_mm: tuple[float, float] = (0.0, 0.0),
     file: str | None = None,
+    check_thickness_mm: float | None = None,
 ) -> PreparedMesh:
     """Load (a path or a ``trimesh.Trimesh``), merge, check, repair or refuse, and place a mesh.
 
@@ -233,6 +235,9 @@ def prepare(
     and location. Repair: duplicate, degenerate faces and isolated shells removed, normals made consistent and
     outward (trimesh), small holes filled (trimesh); what is still open is refused.
     Placement ``plate``: lowest point on z = 0, the xy bounding-box centre on ``plate_center_mm``; ``keep``: as is.
+    ``check_thickness_mm``: the layer thickness; given, the mesh (once free of the other defects) is searched for
+    self-intersections at up to 64 of its layer heights (:mod:`jaxcnc.pbf.selfint`): refused, or with ``repair``
+    built as each layer's union.
     """
     import hashlib
 
@@ -267,6 +272,18 @@ def prepare(
         if after.defects:
             raise MeshError(f"{file}: mesh defects left after repair: {after.summary()}")
         report.repaired.append("normals made consistent and outward")
+    if check_thickness_mm is not None and (repair or not report.defects):
+        from jaxcnc.pbf.selfint import check_heights_mm, self_intersections
+
+        z = check_heights_mm(float(vertices[:, 2].min()), float(vertices[:, 2].max()), check_thickness_mm)
+        n, at = self_intersections(vertices, faces, z)
+        if n:
+            report.defects.append(
+                Defect(f"self-intersections (loops crossing at {n} of {len(z)} heights checked)", n, at)
+            )
+            if not repair:
+                raise MeshError(f"{file}: mesh defects: {report.summary()} (repair = true in [pbf] to repair)")
+            report.repaired.append("self-intersections: each layer built from the union of its loops")
     if placement == "plate":
         lo, hi = vertices.min(axis=0), vertices.max(axis=0)
         shift = np.array([plate_center_mm[0] - (lo[0] + hi[0]) / 2, plate_center_mm[1] - (lo[1] + hi[1]) / 2, -lo[2]])
