@@ -14,7 +14,9 @@ One concept per module:
 - :mod:`jaxcnc.pbf.cli_format` — Common Layer Interface export and reader (ASCII and binary);
 - :mod:`jaxcnc.pbf.build` — the build driver: one file per layer, a manifest with checksums, resumable;
 - :mod:`jaxcnc.pbf.distributed` — the same build on dask.distributed;
-- :mod:`jaxcnc.pbf.picture` — layer pictures, contours and hatches coloured by zone.
+- :mod:`jaxcnc.pbf.picture` — layer pictures, contours and hatches coloured by zone;
+- :mod:`jaxcnc.pbf.scanlist` — a layer as a galvo board list (issue 18's format) and as a planned tick table;
+- :mod:`jaxcnc.pbf.selfint` — self-intersections: loops of one cut that cross themselves or each other.
 """
 
 from __future__ import annotations
