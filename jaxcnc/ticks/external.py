@@ -177,24 +177,12 @@ def plan_external(program: Program, machine: MachineConfig, planner: str | None 
     return ExternalPlan(pos, ev, sections, total_s, length)
 
 
-class _Rows:
-    def __init__(self, pos: np.ndarray, chunk: int = 65536):
-        self.pos, self.chunk = pos, chunk
-
-    @property
-    def n_rows(self) -> int:
-        return int(self.pos.shape[0])
-
-    def __iter__(self):
-        for first in range(0, self.n_rows, self.chunk):
-            yield first, self.pos[first : first + self.chunk]
-
-
 def write_external_table(
     plan: ExternalPlan, program: Program, machine: MachineConfig, path: str | Path, source_options: dict | None = None
 ) -> Path:
     """Write the joined table (every axis, the events, ``external`` sections in the header: per section
     ``[scanner 0/1, first tick, last tick]``)."""
+    from jaxcnc.ticks.sample import ArraySampler
     from jaxcnc.ticks.table import table_meta, write_samples
 
     more = {"source_options": dict(source_options)} if source_options else {}
@@ -202,7 +190,7 @@ def write_external_table(
     meta = table_meta(
         machine, program.file, "external", plan.total_time_s, n_blocks=program.n_blocks, external=secs, **more
     )
-    return write_samples(path, machine, _Rows(plan.positions_mm), plan.events, meta)
+    return write_samples(path, machine, ArraySampler(plan.positions_mm), plan.events, meta)
 
 
 @dataclass

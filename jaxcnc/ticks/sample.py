@@ -59,6 +59,22 @@ class Sampler(Protocol):
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]: ...
 
 
+class ArraySampler:
+    """A :class:`Sampler` of positions already computed: ``pos`` ``(n, n_axes)`` mm, handed out ``chunk`` rows at a
+    time (split and stage + galvo plans are sampled at the tick rate when they are planned)."""
+
+    def __init__(self, pos: np.ndarray, chunk: int = CHUNK_TICKS):
+        self.pos, self.chunk = pos, chunk
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.pos.shape[0])
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
+        for first in range(0, self.n_rows, self.chunk):
+            yield first, self.pos[first : first + self.chunk]
+
+
 def machine_axes(program_p: np.ndarray, axis_source: np.ndarray, home: np.ndarray) -> np.ndarray:
     """Map program x, y, z columns ``(m, 3)`` to machine axes (``axis_source[i] = -1``: stays at home)."""
     out = np.empty((program_p.shape[0], len(axis_source)))

@@ -18,23 +18,11 @@ from jaxcnc.format import EVENT_DTYPE, EventKind, TableFile
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.split import SplitPlan, calibration, first_difference, half_field, second_difference
 from jaxcnc.program import Program, program_start
+from jaxcnc.ticks.sample import ArraySampler
 from jaxcnc.ticks.table import table_meta, write_samples
 
 #: Numeric slack on the tool-point distance (mm) beside the one-discrete tolerance.
 SLACK_MM = 1e-9
-
-
-class _ArraySampler:
-    def __init__(self, pos: np.ndarray, chunk: int = 65536):
-        self.pos, self.chunk = pos, chunk
-
-    @property
-    def n_rows(self) -> int:
-        return int(self.pos.shape[0])
-
-    def __iter__(self):
-        for first in range(0, self.n_rows, self.chunk):
-            yield first, self.pos[first : first + self.chunk]
 
 
 def axis_positions(plan: SplitPlan, machine: MachineConfig) -> np.ndarray:
@@ -80,7 +68,7 @@ def write_split_table(
         feed_mm_s=plan.feed_mm_s,
         **more,
     )
-    return write_samples(path, machine, _ArraySampler(axis_positions(plan, machine)), split_events(plan, program), meta)
+    return write_samples(path, machine, ArraySampler(axis_positions(plan, machine)), split_events(plan, program), meta)
 
 
 @dataclass
