@@ -475,7 +475,8 @@ def encode_rows(
 
     Vectorised: the vector length from every row is searched for all rows of a block at once
     (:func:`_vector_lengths`); the list follows them from row 0 (one integer step per vector) and is assembled
-    with NumPy. The same records as :func:`encode_rows_loop`, record for record.
+    with NumPy. The same records, record for record, as the one-step-per-vector reference in
+    ``tests/test_scanner_vectors.py`` (compared on random tables).
     """
     pos = np.zeros((positions.shape[0], 3), np.int64)
     pos[:, : positions.shape[1]] = positions
@@ -538,60 +539,6 @@ def encode_rows(
     key_seq = np.concatenate([sel, np.zeros(las.size + ks.size, np.int64)])
     body = body[np.lexsort((key_seq, key_sub, key_row))]
     return np.concatenate([records(head), body, records([make(Op.LIST_END)])])
-
-
-def encode_rows_loop(
-    positions: np.ndarray,
-    power: np.ndarray,
-    pulses: np.ndarray | None = None,
-) -> np.ndarray:
-    """:func:`encode_rows` one Python step per vector: the first implementation, kept as its reference (the
-    tests compare the two, record for record, on random tables).
-
-    ``positions``: ``(n, k)`` int discretes, ``k <= 3`` (row 0 is where the list starts); ``power``: ``(n,)`` laser
-    output per row (0 = off); ``pulses``: records with fields ``tick``, ``kind`` (9 work, 10 idle), ``aux``,
-    ``value`` (the table's pulse events) or ``None``. Each vector is as long as the board's interpolation
-    (:func:`_lerp`) reproduces the rows exactly; a vector ends where the laser power changes and at every
-    pulse. Returns records ending in LIST_END.
-    """
-    pos = np.zeros((positions.shape[0], 3), np.int64)
-    pos[:, : positions.shape[1]] = positions
-    power = np.asarray(power, np.float64)
-    n = pos.shape[0]
-    if n == 0:
-        raise ValueError("no rows to encode")
-    pulse_ticks = np.zeros(0, np.int64) if pulses is None else np.asarray(pulses["tick"], np.int64)
-    change = np.flatnonzero(power[1:] != power[:-1])  # power changes at row c+1: a vector ends at row c
-    breaks = np.unique(np.concatenate([[0, n - 1], change, pulse_ticks[(pulse_ticks > 0) & (pulse_ticks < n)]]))
-    items = [make(Op.LIST_START, pos[0], value=power[0])]
-    cur_power = power[0]
-    if cur_power > 0:
-        items.append(make(Op.SET_LASER, value=cur_power))
-    by_tick: dict[int, list[int]] = {}
-    for i, t in enumerate(pulse_ticks.tolist()):
-        by_tick.setdefault(t, []).append(i)
-
-    def emit_pulses(t: int) -> None:
-        for i in by_tick.get(t, ()):
-            e = pulses[i]
-            flags = FLAG_IDLE if int(e["kind"]) == 10 else 0
-            items.append(make(Op.LASER_PULSE, aux=int(e["aux"]) if flags == 0 else -1, value=e["value"], flags=flags))
-
-    emit_pulses(0)
-    for a, b in zip(breaks[:-1].tolist(), breaks[1:].tolist(), strict=True):
-        p_next = power[a + 1]
-        if p_next != cur_power and p_next > 0:
-            items.append(make(Op.SET_LASER, value=p_next))
-        cur_power = p_next
-        op = Op.TIMED_MARK if p_next > 0 else Op.TIMED_JUMP
-        k = a
-        while k < b:  # one step per vector
-            m = _longest_linear(pos, k, b)
-            items.append(make(op, pos[k + m], ticks=m))
-            k += m
-        emit_pulses(b)
-    items.append(make(Op.LIST_END))
-    return records(items)
 
 
 # ---------------------------------------------------------------------------------------------- execution
