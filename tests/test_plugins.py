@@ -258,3 +258,28 @@ def test_block_kind_errors_are_located(monkeypatch, tmp_path):
         parse_gcode(bad, file="f.nc", dialect=fanuc)
     with pytest.raises(SourceError, match=r"f.nc:4:1: G3.2: needs I, J .* and R"):
         parse_gcode(text.replace(f" R{R_BASE} F600", " F600"), file="f.nc", dialect=fanuc)
+
+
+def test_a_block_kind_lowered_to_an_arc_keeps_its_plane(monkeypatch):
+    """A kind's Arc pieces become ARC rows in the plane the piece names (here G18, ZX), whatever plane the
+    program is in; a line piece after it continues from the arc's end."""
+    import numpy as np
+
+    from jaxcnc.blocks import BLOCK_KINDS, Arc, BlockKind, Line
+    from jaxcnc.gcode.interpreter import parse_gcode
+    from jaxcnc.program import Kind
+
+    class QuarterZX(BlockKind):
+        name = "quarter circle in ZX, then a line"
+
+        def lower(self, block):
+            s = block.start_mm
+            mid = s + np.array([5.0, 0.0, 5.0])
+            return [Arc(mid, s + np.array([0.0, 0.0, 5.0]), -1, 18), Line(block.end_mm)]
+
+    monkeypatch.setitem(BLOCK_KINDS._items, "G7.1", QuarterZX())
+    prog = parse_gcode("G17 G1 X0 Y0 Z0 F600\nG7.1 X10 Y0 Z5\nG1 X11\n", file="q.ngc")
+    assert prog.kind.tolist() == [Kind.LINE, Kind.ARC, Kind.LINE, Kind.LINE]
+    assert prog.plane.tolist() == [17, 18, 17, 17]
+    assert np.allclose(prog.end[1], [5, 0, 5]) and np.allclose(prog.start[2], prog.end[1])
+    assert np.allclose(prog.end[2], [10, 0, 5]) and prog.line.tolist() == [1, 2, 2, 3]

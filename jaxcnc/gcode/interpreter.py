@@ -347,6 +347,7 @@ class _Interpreter:
         event: int = 0,
         event_value: int = 0,
         curve: int = -1,
+        plane: int | None = None,
     ) -> None:
         s, r = self.s, self.s.rows
         end = s.pos if end is None else end
@@ -366,7 +367,7 @@ class _Interpreter:
         r["event_value"].append(event_value)
         r["line"].append(line)
         r["curve"].append(curve)
-        r["plane"].append(s.plane)
+        r["plane"].append(s.plane if plane is None else plane)
         s.pos = np.asarray(end, dtype=np.float64).copy()
         # Rows that stand still (dwell, events) leave the machine at rest for the next one.
         s.pending_stop = kind in (Kind.DWELL, Kind.EVENT)
@@ -695,11 +696,7 @@ class _Interpreter:
             if isinstance(p, BlockLine):
                 self.emit(Kind.LINE, b.line, p.end_mm, feed=feed)
             elif isinstance(p, BlockArc):
-                plane, s.plane = s.plane, p.plane
-                try:
-                    self.emit(Kind.ARC, b.line, p.end_mm, center=p.center_mm, turn=p.turn, feed=feed)
-                finally:
-                    s.plane = plane
+                self.emit(Kind.ARC, b.line, p.end_mm, center=p.center_mm, turn=p.turn, feed=feed, plane=p.plane)
             else:
                 curve = (p.degree, p.points_mm, p.weights, p.knots)
                 try:
