@@ -331,12 +331,16 @@ class HalStreamerSink:
         fmt = " ".join(["%d"] * rows.shape[1] + ["%.9g", "%d", "%d"]) + "\n"
         cols = [rows.astype(np.int64), power, (power > 0).astype(np.int64), pulse]
         flat = np.column_stack(cols).astype(object).ravel()
+        text = ((fmt * m) % tuple(flat)).encode()
+        # counted as sent before they reach the FIFO: once written, HAL may execute them and the sampler thread
+        # report them before this thread runs again, and it checks "executed <= sent" (a failed write ends the
+        # sink anyway)
+        self._sent += m
         try:
-            self._streamer.stdin.write(((fmt * m) % tuple(flat)).encode())
+            self._streamer.stdin.write(text)
             self._streamer.stdin.flush()
         except BrokenPipeError:
             raise JaxcncError(f"halstreamer sink: halstreamer exited ({self._stderr(self._streamer)})") from None
-        self._sent += m
         if not self._running and (self._sent >= self.depth // 2 or self._sent == self.header.n_rows):
             self._start()
 
