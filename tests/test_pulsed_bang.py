@@ -102,3 +102,23 @@ def test_sweeps_never_lengthen_and_path_speed_within_feed_at_pulses_and_rapid_be
     assert speed.max() > with_margin(GLASS.path.feed)  # jumps do use the rapid
     at_pulse = np.maximum(speed[plan.work_tick[1:-1] - 1], speed[plan.work_tick[1:-1]])
     assert at_pulse.max() <= with_margin(GLASS.path.feed) * (1 + 1e-3)
+
+
+def test_recap_boxes_hold_the_velocities_and_keep_the_path_within_the_cap():
+    """Each turned knot box contains its planned velocity, its diagonal is the cap (so every velocity in it
+    is within the cap), and it gives the direction of travel more than the isotropic ``F/√3``."""
+    from jaxcnc.planners.pulsed.bang import recap
+
+    rng = np.random.default_rng(3)
+    F, V = 30.0, np.array([50.0, 50.0, 20.0])
+    v = rng.uniform(-1, 1, (500, 3)) * F / np.sqrt(3)
+    v[:10] = 0.0
+    direction = rng.normal(size=(500, 3))
+    direction[:5] = 0.0
+    box = recap(v, direction, F, V)
+    assert np.all(np.abs(v) <= box * (1 + 1e-12))
+    assert np.all(np.linalg.norm(np.minimum(box, F), axis=1) <= F * (1 + 1e-12))
+    corners = box[:, None, :] * rng.choice([-1.0, 1.0], (500, 8, 3))
+    assert np.linalg.norm(corners, axis=2).max() <= F * (1 + 1e-12)
+    along = recap(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]), F, V)[0]
+    assert along[0] == pytest.approx(F) and along[1] == pytest.approx(0.0)

@@ -21,12 +21,14 @@ Durations are chosen by greedy sweeps (``lax.scan`` s over the gaps, nothing sam
    inside its interval (nearest the mean of its neighbours' mean speeds).
 
 Speed caps (path speed, Euclidean, made linear as a per-axis box whose diagonal is the cap,
-:func:`path_caps`): at a pulse the beam burns, so the path speed there is within the feed (each axis
-``feed/√3``); between pulses the beam is dark, so the rapid applies, shared among the axes by the gap's
-direction; every axis within its ``v_max``. The speed is piecewise linear in time, so these hold on the
-whole gap. The axes' accelerations step at the knots, so a machine with a jerk limit is planned with
-``sync`` instead; the first point is reached from rest (a straight move from the start) and the last is
-left at rest.
+:func:`path_caps`): at a pulse the beam burns, so the path speed there is within the feed; between pulses
+the beam is dark, so the rapid applies, shared among the axes by the gap's direction; every axis within
+its ``v_max``. The knot boxes start at ``feed/√3`` per axis; after the sweeps they are turned towards the
+planned velocities (:func:`recap`: each box still contains its knot's velocity, the slack goes along the
+direction of travel), and :data:`RECAP_PASSES` more sweeps run against the plan — never longer.
+The speed is piecewise linear in time, so these hold on the whole gap. The axes' accelerations step at
+the knots, so a machine with a jerk limit is planned with ``sync`` instead;
+the first point is reached from rest (a straight move from the start) and the last is left at rest.
 """
 
 from __future__ import annotations
@@ -243,6 +245,17 @@ def path_caps(direction: np.ndarray, path_mm_s: float, v_max: np.ndarray, floor:
     return np.minimum(w * path_mm_s, v_max[None])
 
 
+def knot_directions(D: np.ndarray, h_s: np.ndarray) -> np.ndarray:
+    """Direction of travel through each knot ``(g+1, 3)``: the sum of the mean velocities of its two gaps.
+
+    ``D`` ``(g, 3)`` the gaps' displacements, ``h_s`` ``(g,)`` an estimate of their durations (the
+    velocity-bound ones). The end knots take their one gap's direction. Any direction gives a valid cap
+    (:func:`path_caps`); this one is where the beam is heading as it passes the point.
+    """
+    mean = D / h_s[:, None]
+    return np.concatenate([mean[:1], mean[:-1] + mean[1:], mean[-1:]])
+
+
 def _pad(a: np.ndarray, size: int, fill) -> np.ndarray:
     out = np.empty((size,) + a.shape[1:], a.dtype)
     out[: a.shape[0]] = a
@@ -297,6 +310,53 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
     return (ticks[::-1] if gaps.reverse else ticks), bool(np.all(np.asarray(ok)[:g]))
 
 
+def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, n_min, passes):
+    """``passes`` sweeps against ``tried[-1]``, alternating direction (the first in ``other``'s direction).
+
+    Returns ``(ticks, lo, hi, tried)`` for the shortest durations whose speeds check out (reachable from
+    rest, the last knot at rest), or ``None`` when none do.
+    """
+    ticks = tried[-1]
+    for p in range(passes):
+        one, two = (other, gaps) if p % 2 == 0 else (gaps, other)
+        new, good = _sweep(one, two, cand, ticks, A, f, n_min)
+        if not good or new.sum() >= ticks.sum():
+            break
+        ticks = np.minimum(new, ticks)
+        tried = [*tried, ticks]
+    fwd = gaps if not gaps.reverse else other
+    for ticks in tried[::-1]:  # the shortest whose speeds check out (the last, barring a rounding slip)
+        lo, hi, ok = fwd.reachable(ticks, A, f)
+        if ok and np.all(lo[-1] <= EPS_MM_S) and np.all(hi[-1] >= -EPS_MM_S):
+            lo[-1] = hi[-1] = 0.0
+            return ticks, lo, hi, tried
+    return None
+
+
+#: Rounds of knot boxes turned towards the planned velocities, and the sweeps against each.
+RECAPS = 1
+RECAP_PASSES = 2
+
+
+def recap(v: np.ndarray, direction: np.ndarray, path_mm_s: float, v_max: np.ndarray) -> np.ndarray:
+    """Knot boxes ``(g+1, 3)`` that contain the planned knot velocities ``v`` and keep the path within the cap.
+
+    Each axis gets ``w_i² = v_i²/F² + s u_i²`` (``F`` the cap, ``u`` the unit ``direction``, ``s = 1 −
+    |v|²/F²`` the unused share): ``Σ w_i² = |v|²/F² + s = 1``, so any velocity in the box ``|x_i| <= w_i F``
+    has ``|x|² <= Σ w_i² F² = F²`` — the path speed within the cap — and ``|v_i| <= w_i F``: the plan the
+    velocities come from stays feasible, so sweeps against it never lengthen it. The slack goes along the
+    direction of travel. (``|v| <= F`` holds since ``v`` lies in a box of the same kind; rounding is clipped.)
+    """
+    r2 = (v / path_mm_s) ** 2
+    used = r2.sum(axis=1, keepdims=True)
+    r2 = r2 / np.maximum(used, 1.0)
+    norm = np.linalg.norm(direction, axis=1, keepdims=True)
+    n = direction.shape[1]
+    u2 = np.where(norm > 0, direction / np.where(norm > 0, norm, 1.0), 1.0 / np.sqrt(n)) ** 2
+    w2 = r2 + np.maximum(0.0, 1.0 - r2.sum(axis=1, keepdims=True)) * u2
+    return np.minimum(np.sqrt(w2) * path_mm_s, v_max[None])
+
+
 @register_pulse_planner("bang")
 def plan_bang(req: PulseRequest) -> PulsePlan:
     """Plan with constant-acceleration pieces and knot speeds from interval propagation (module docstring)."""
@@ -313,8 +373,8 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     g = D.shape[0]
     # dark between pulses: the path speed within the rapid; at a pulse (burning) within the feed
     capm = path_caps(D, req.rapid_mm_s, V)
-    capk = np.broadcast_to(np.minimum(req.feed_mm_s / np.sqrt(D.shape[1]), V), (g + 1, D.shape[1]))
     lo_ticks = np.maximum(np.ceil(np.max(np.abs(D) / capm, axis=1) * f), w.n_min)
+    capk = np.broadcast_to(np.minimum(req.feed_mm_s / np.sqrt(D.shape[1]), V), (g + 1, D.shape[1]))
     cand = candidates(lo_ticks, w)
     # long jumps (a triangle from rest at A would pass the cap) cruise through their middle half
     cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
@@ -322,23 +382,23 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
     bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
     ticks, _ = _sweep(fwd, bwd, cand, None, A, f, w.n_min, lookahead=LOOKAHEAD)
-    tried = [ticks]
-    for p in range(PASSES):
-        gaps, other = (bwd, fwd) if p % 2 == 0 else (fwd, bwd)
-        new, good = _sweep(gaps, other, cand, ticks, A, f, w.n_min)
-        if not good or new.sum() >= ticks.sum():
-            break
-        ticks = np.minimum(new, ticks)
-        tried.append(ticks)
-    for ticks in tried[::-1]:  # the shortest whose speeds check out (the last, barring a rounding slip)
-        lo, hi, ok = fwd.reachable(ticks, A, f)
-        if ok and np.all(lo[-1] <= EPS_MM_S) and np.all(hi[-1] >= -EPS_MM_S):
-            break
-    else:
+    found = _improve(fwd, bwd, cand, [ticks], A, f, w.n_min, PASSES)
+    if found is None:
         return plan_sync(req)
-    passes = [int(t.sum()) for t in tried]
-    lo[-1] = hi[-1] = 0.0
+    ticks, lo, hi, tried = found
     v = np.asarray(backward(D, ticks, cruise, capm, capk, lo, hi, A, np.float64(f)))
+    # knot boxes turned towards the planned velocities (which stay inside): sweeps against these durations
+    for _ in range(RECAPS):
+        capk2 = recap(v, knot_directions(D, ticks / f), req.feed_mm_s, V)
+        fwd2, bwd2 = (_Gaps(D, cruise, capm, capk2, size, reverse=r) for r in (False, True))
+        found = _improve(bwd2, fwd2, cand, [ticks], A, f, w.n_min, RECAP_PASSES)
+        if found is None or found[0].sum() >= ticks.sum():
+            break
+        capk = capk2
+        ticks, lo, hi, more = found
+        tried += more[1:]
+        v = np.asarray(backward(D, ticks, cruise, capm, capk, lo, hi, A, np.float64(f)))
+    passes = [int(t.sum()) for t in tried]
     # the approach: rest to rest from the start to the first point, the first pulse on the next whole tick
     ua, length, vp, a, t = rest_to_rest(req, req.home[None], pts[:1], np.array([req.rapid_mm_s]))
     z = np.zeros(1)
