@@ -23,6 +23,16 @@ The argument (``docs/pulsed.md``, "The travel-aware lower bound"):
    alone. The window's least sum is a lower bound on ``d_p + d_g + d_q``.
 4. *Sum.* Gaps are split into disjoint windows (chosen where they gain most, never overlapping) and
    single gaps; the sum of their lower bounds is a lower bound on the burn time.
+5. *Path limits* (``feed_mm_s``, ``rapid_mm_s``: the path speed at most the feed at every pulse, at most
+   the rapid everywhere — what the planners honour). Projected on any unit direction ``w`` the motion
+   ``s = w·p`` has ``|s''| <= Σ|w_k| A_k``, ``|s'| <= min(rapid, Σ|w_k| V_k)`` and ``|s'| <= feed`` at a
+   pulse; steps 2-3 run on the axes and on the gap's own direction with these limits, every end speed
+   at most the feed (a gap alone: the tent from the feed to the feed).
+6. *Chains* (:func:`_chain_ticks`). Per axis, a shortest path over the knot speed's intervals: the cost
+   of a gap between two intervals is the least admissible count at which any speeds in them admit a
+   motion covering the gap (closed form), so the path's cost is at most any motion's time; stretches of
+   consecutive long gaps are chained, the rest counts the gaps' own bounds. The bound is the larger of
+   the window sum and the best axis' chain.
 
 Everything is NumPy and vectorised over gaps and candidates; a job of 100k points takes
 milliseconds to a fraction of a second.
@@ -30,6 +40,7 @@ milliseconds to a fraction of a second.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +53,14 @@ ROUND_SLACK = 1e-9
 #: How many blocks of admissible tick counts of a neighbour gap the window bound enumerates (about
 #: nine periods at the documents' machine); longer neighbours are covered by the velocity bound.
 N_BLOCKS = 64
+#: Gaps per block of the chain bound's cost tensors.
+CHAIN_CHUNK = 128
+#: Candidate blocks per gap in the chain bound (about 4.5 periods above the gap's own bound).
+N_CHAIN = 32
+#: Knot-speed intervals per axis in the chain bound.
+CHAIN_BINS = 16
+#: Gaps of context on either side of a long gap in the chain bound.
+CHAIN_CONTEXT = 3
 #: Consecutive candidate counts are bounded together in blocks of this many ticks per period.
 BLOCK_TICKS = 4
 
@@ -56,6 +75,8 @@ class TravelBound:
         window_centre: ``(w,)`` gaps at the centre of the three-gap windows used.
         window_ticks: ``(w,)`` each window's bound on the sum of its three gaps.
         tick_hz: ticks per second.
+        chain_ticks: the chain bound (dynamic programming over knot speeds, the best axis; 0: not run).
+        window_sum_ticks: the bound from the gaps and windows alone (``ticks`` is the larger of the two).
     """
 
     ticks: int
@@ -63,6 +84,8 @@ class TravelBound:
     window_centre: np.ndarray
     window_ticks: np.ndarray
     tick_hz: float
+    chain_ticks: int = 0
+    window_sum_ticks: int = 0
 
     @property
     def seconds(self) -> float:
@@ -118,15 +141,92 @@ def _candidates(window: PulseWindow, lo: np.ndarray, count: int) -> tuple[np.nda
     return first, last
 
 
+def _directions(D_vec: np.ndarray, with_own: bool) -> np.ndarray:
+    """``(g, K, 3)`` unit directions the bound projects each gap on: the axes, and the gap's own direction.
+
+    ``D_vec`` ``(g, 3)`` signed displacements; a gap of length 0 gets ``e_x`` as its own direction.
+    """
+    g = D_vec.shape[0]
+    axes = np.broadcast_to(np.eye(3), (g, 3, 3))
+    if not with_own:
+        return np.array(axes)
+    length = np.linalg.norm(D_vec, axis=1, keepdims=True)
+    own = np.where(length > 0, D_vec / np.where(length > 0, length, 1.0), np.array([1.0, 0.0, 0.0]))
+    return np.concatenate([axes, own[:, None, :]], axis=1)
+
+
+def _direction_limits(W, v_max, a_max, feed, rapid):
+    """Limits of the motion projected on directions ``W`` ``(..., 3)``: ``(A_w, Vc_w, F_w)`` each ``(...)``.
+
+    ``s = w·p`` has ``|s''| <= Σ|w_k| A_k`` and ``|s'| <= Σ|w_k| V_k`` (each axis in its box), and
+    ``|s'| <= ‖v‖ <= rapid`` everywhere, ``<= feed`` at a pulse (the path limits). ``inf`` where an axis
+    with ``w_k != 0`` has no limit; ``feed``/``rapid`` ``inf`` when not applied.
+    """
+    aw = np.abs(W)
+    A_w = np.sum(np.where(aw > 0, aw * a_max, 0.0), axis=-1)
+    V_w = np.sum(np.where(aw > 0, aw * v_max, 0.0), axis=-1)
+    Vc = np.minimum(V_w, rapid)
+    return A_w, Vc, np.minimum(Vc, feed)
+
+
 def lower_bound_travel(
-    points: np.ndarray, window: PulseWindow, v_max: np.ndarray, a_max: np.ndarray, min_gain_ticks: int = 1
+    points: np.ndarray,
+    window: PulseWindow,
+    v_max: np.ndarray,
+    a_max: np.ndarray,
+    min_gain_ticks: int = 1,
+    feed_mm_s: float | None = None,
+    rapid_mm_s: float | None = None,
+    chain_bins: int = CHAIN_BINS,
 ) -> TravelBound:
     """A certified lower bound on the burn time of ``points`` ``(n, 3)`` mm burned in this order.
 
     ``v_max``, ``a_max`` ``(3,)``: the machine's axis limits (mm/s, mm/s²; ``inf`` where absent) —
-    the limits the table is verified against, not a planner's reduced ones. See the module docstring
-    for the argument; ``min_gain_ticks``: only windows that gain at least this much are searched.
+    the limits the table is verified against, not a planner's reduced ones. ``feed_mm_s``,
+    ``rapid_mm_s``: the machine's path limits (its ``[path] feed`` and ``rapid``, not reduced): the
+    path speed at every pulse instant at most the feed, everywhere at most the rapid, the limits the
+    planners honour. ``None`` (both): the axis-only bound, certified against ``v_max``/``a_max`` alone.
+    With the path limits the chain bound (:func:`_chain_ticks`, ``chain_bins`` knot-speed intervals per
+    axis; ``0``: not used) runs over every stretch of long gaps. See the module docstring for the
+    argument; ``min_gain_ticks``: only windows that gain at least this much are searched.
     """
+    bound = _window_bound(points, window, v_max, a_max, min_gain_ticks, feed_mm_s, rapid_mm_s)
+    bound = dataclasses.replace(bound, window_sum_ticks=bound.ticks)
+    if (feed_mm_s is None and rapid_mm_s is None) or chain_bins <= 0 or bound.gap_ticks.size == 0:
+        return bound
+    feed = np.inf if feed_mm_s is None else float(feed_mm_s)
+    rapid = np.inf if rapid_mm_s is None else float(rapid_mm_s)
+    gap = bound.gap_ticks
+    # chains of long gaps (next to another) with CHAIN_CONTEXT gaps on either side; elsewhere the windows
+    # already see every long gap with its neighbours. Long: more than a period, or a mean speed over a
+    # shortest period that one period's acceleration cannot reach
+    d_all = np.diff(np.asarray(points, dtype=np.float64), axis=0)
+    h_min = window.n_min / window.tick_hz
+    with np.errstate(invalid="ignore"):
+        fast = np.any(np.abs(d_all) > np.asarray(a_max) * h_min**2, axis=1)
+    long = (gap > window.n_min) | fast
+    paired = long & (np.concatenate([[False], long[:-1]]) | np.concatenate([long[1:], [False]]))
+    spread = np.convolve(paired, np.ones(2 * CHAIN_CONTEXT + 1), mode="full")
+    hard = spread[CHAIN_CONTEXT : CHAIN_CONTEXT + gap.shape[0]] > 0
+    start = hard & ~np.concatenate([[False], hard[:-1]])
+    d_vec = d_all[hard]
+    rest = int(gap[~hard].sum())
+    chain = 0
+    for k in range(3):
+        V_k, A_k = float(np.asarray(v_max)[k]), float(np.asarray(a_max)[k])
+        if not (np.isfinite(A_k) and hard.any() and np.any(d_vec[:, k] != 0)):
+            continue
+        v_cap = min(V_k, rapid)
+        knot = min(v_cap, feed)
+        if not np.isfinite(knot):
+            continue
+        ticks = rest + _chain_ticks(d_vec[:, k], gap[hard], start[hard], window, knot, v_cap, A_k, chain_bins, N_CHAIN)
+        chain = max(chain, ticks)
+    return dataclasses.replace(bound, ticks=max(bound.ticks, chain), chain_ticks=chain)
+
+
+def _window_bound(points, window, v_max, a_max, min_gain_ticks, feed_mm_s, rapid_mm_s) -> TravelBound:
+    """Steps 1-4 of the argument: the gaps' own bounds and the disjoint three-gap windows."""
     f = window.tick_hz
     n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
     pts = np.asarray(points, dtype=np.float64)
@@ -134,9 +234,18 @@ def lower_bound_travel(
         return TravelBound(0, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), f)
     V = np.asarray(v_max, dtype=np.float64)
     A = np.asarray(a_max, dtype=np.float64)
-    D = np.abs(np.diff(pts, axis=0))  # (g, 3)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_v = np.max(np.where(D > 0, D / V, 0.0), axis=1)
+    path = feed_mm_s is not None or rapid_mm_s is not None
+    feed = np.inf if feed_mm_s is None else float(feed_mm_s)
+    rapid = np.inf if rapid_mm_s is None else float(rapid_mm_s)
+    D_vec = np.diff(pts, axis=0)  # (g, 3)
+    W = _directions(D_vec, with_own=path)  # (g, K, 3)
+    A_w, Vc_w, F_w = _direction_limits(W, V, A, feed, rapid)
+    P = np.abs(np.einsum("gkd,gd->gk", W, D_vec))  # (g, K) distance along each direction
+    if path:  # from at most the feed at the opening pulse to at most the feed at the closing one
+        t_v = np.max(_least_time(P, F_w, F_w, Vc_w, A_w), axis=1)
+    else:  # the axis-only bound: the velocity bound alone
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_v = np.max(np.where(P > 0, P / Vc_w, 0.0), axis=1)
     gap = snap_up_ticks(np.maximum(_ticks_at_least(t_v, f), n_min), n_min, n_max, idle)[0]
     total = int(gap.sum())
     g = gap.shape[0]
@@ -145,8 +254,8 @@ def lower_bound_travel(
     # windows p, c, q: each centre c in 1..g-2; bound the centre gap with entry/exit speeds limited by
     # its neighbours' durations, at the neighbours' least durations first (a quick screen)
     c = np.arange(1, g - 1)
-    axes = np.flatnonzero(np.isfinite(A))
-    screen = _window_ticks(D, c, gap[c - 1][:, None], gap[c + 1][:, None], V, A, axes, f, n_min, n_max, idle)[:, 0, 0]
+    lim = (D_vec, W, V, A, feed, rapid, f, n_min, n_max, idle)
+    screen = _window_ticks(c, gap[c - 1][:, None], gap[c + 1][:, None], *lim)[:, 0, 0]
     base = gap[c - 1] + gap[c] + gap[c + 1]
     # the screen puts both neighbours at their least durations: an upper estimate of the window's gain
     c = c[screen - base >= min_gain_ticks]
@@ -158,9 +267,9 @@ def lower_bound_travel(
         cs = c[s : s + 256]
         p_lo, p_hi = _candidates(window, gap[cs - 1], count)
         q_lo, q_hi = _candidates(window, gap[cs + 1], count)
-        best = _window_min(D, cs, p_lo, p_hi, q_lo, q_hi, V, A, axes, f, n_min, n_max, idle)
+        best = _window_block(cs, p_lo, p_hi, q_lo, q_hi, *lim).min(axis=(1, 2))
         # counts beyond the enumerated ones: the neighbour alone is longer than its last block, the
-        # centre at least its velocity bound
+        # centre at least its own bound
         tail_p = p_hi[:, -1] + 1 + gap[cs] + gap[cs + 1]
         tail_q = q_hi[:, -1] + 1 + gap[cs] + gap[cs - 1]
         win[s : s + 256] = np.minimum(best, np.minimum(tail_p, tail_q))
@@ -171,40 +280,55 @@ def lower_bound_travel(
     return TravelBound(total, gap, c, win, f)
 
 
+def _least_time(dist, a, b, v_cap, a_cap):
+    """:func:`tent_time_s` where the acceleration is bounded, ``dist / v_cap`` where it is not (arrays)."""
+    finite = np.isfinite(a_cap)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = tent_time_s(dist, a, b, v_cap, np.where(finite, a_cap, 1.0))
+        return np.where(finite, t, np.where(dist > 0, dist / v_cap, 0.0))
+
+
 def _entry_speed(D_side, ticks, A, f):
     """Bound on the speed at the shared pulse: ``|D|/h + A h/2`` over a neighbour of ``ticks``."""
     h = ticks / f
     return D_side / h + 0.5 * A * h
 
 
-def _window_ticks(D, c, p_ticks, q_ticks, V, A, axes, f, n_min, n_max, idle):
+def _window_ticks(c, p_ticks, q_ticks, *lim):
     """Sum of the window's bound for neighbour durations ``p_ticks`` ``(w, P)``, ``q_ticks`` ``(w, Q)``.
 
-    Returns ``(w, P, Q)`` ticks: ``p + q + snap(centre)`` with the centre's least time over all axes.
+    Returns ``(w, P, Q)`` ticks: ``p + q + snap(centre)`` with the centre's least time over all directions.
     The entry speeds are taken at these durations exactly.
     """
-    return _window_block(D, c, p_ticks, p_ticks, q_ticks, q_ticks, V, A, axes, f, n_min, n_max, idle)
+    return _window_block(c, p_ticks, p_ticks, q_ticks, q_ticks, *lim)
 
 
-def _window_block(D, c, p_lo, p_hi, q_lo, q_hi, V, A, axes, f, n_min, n_max, idle):
-    """Like :func:`_window_ticks` for blocks ``[p_lo, p_hi]`` × ``[q_lo, q_hi]``: a bound over each block."""
+def _window_block(c, p_lo, p_hi, q_lo, q_hi, D_vec, W, V, A, feed, rapid, f, n_min, n_max, idle):
+    """Like :func:`_window_ticks` for blocks ``[p_lo, p_hi]`` × ``[q_lo, q_hi]``: a bound over each block.
+
+    Each of the centre's directions ``W[c]`` (the axes; with path limits also the centre gap's own) is a
+    1-D motion with the projected limits (:func:`_direction_limits`); the centre's least time is the
+    largest over them.
+    """
+    Wc = W[c]  # (w, K, 3)
+    A_w, Vc_w, F_w = _direction_limits(Wc, V, A, feed, rapid)
     t_c = np.zeros((c.shape[0], p_lo.shape[1], q_lo.shape[1]))
-    for k in axes:  # three axes at most
-        a = np.maximum(
-            _entry_speed(D[c - 1, k][:, None], p_lo, A[k], f), _entry_speed(D[c - 1, k][:, None], p_hi, A[k], f)
-        )
-        b = np.maximum(
-            _entry_speed(D[c + 1, k][:, None], q_lo, A[k], f), _entry_speed(D[c + 1, k][:, None], q_hi, A[k], f)
-        )
-        t = tent_time_s(D[c, k][:, None, None], a[:, :, None], b[:, None, :], V[k], A[k])
-        t_c = np.maximum(t_c, t)
+    for k in range(Wc.shape[1]):  # three or four directions
+        w = Wc[:, k]
+        fin = np.isfinite(A_w[:, k])
+        if not fin.any():
+            continue
+        Ak = np.where(fin, A_w[:, k], 1.0)[:, None]
+        Dp = np.abs(np.sum(w * D_vec[c - 1], axis=1))[:, None]
+        Dq = np.abs(np.sum(w * D_vec[c + 1], axis=1))[:, None]
+        Dc = np.abs(np.sum(w * D_vec[c], axis=1))[:, None, None]
+        Fk = F_w[:, k][:, None]
+        a = np.minimum(Fk, np.maximum(_entry_speed(Dp, p_lo, Ak, f), _entry_speed(Dp, p_hi, Ak, f)))
+        b = np.minimum(Fk, np.maximum(_entry_speed(Dq, q_lo, Ak, f), _entry_speed(Dq, q_hi, Ak, f)))
+        t = tent_time_s(Dc, a[:, :, None], b[:, None, :], Vc_w[:, k][:, None, None], Ak[:, :, None])
+        t_c = np.maximum(t_c, np.where(fin[:, None, None], t, 0.0))
     d_c = snap_up_ticks(np.maximum(_ticks_at_least(t_c, f), n_min), n_min, n_max, idle)[0]
     return p_lo[:, :, None] + q_lo[:, None, :] + d_c
-
-
-def _window_min(D, c, p_lo, p_hi, q_lo, q_hi, V, A, axes, f, n_min, n_max, idle):
-    """Least bound over all candidate blocks of both neighbours: ``(w,)`` ticks."""
-    return _window_block(D, c, p_lo, p_hi, q_lo, q_hi, V, A, axes, f, n_min, n_max, idle).min(axis=(1, 2))
 
 
 def _disjoint(centre: np.ndarray, gain: np.ndarray) -> np.ndarray:
@@ -220,3 +344,59 @@ def _disjoint(centre: np.ndarray, gain: np.ndarray) -> np.ndarray:
             near &= other != np.arange(centre.shape[0])
             keep &= ~near | (key > key[other])
     return keep
+
+
+def _dmax(v0, v1, h, v_cap, a_max):
+    """``∫_0^h min(v0 + A t, v1 + A (h - t), Vc) dt``: the farthest a 1-D motion from ``v0`` to ``v1`` gets.
+
+    Signed speeds with ``|v0 - v1| <= A h`` and ``v0, v1 <= Vc``; arrays, broadcast.
+    """
+    u = 0.5 * (v0 + v1 + a_max * h)
+    tent = (2.0 * u * u - v0 * v0 - v1 * v1) / (2.0 * a_max)
+    cut = v_cap * h - ((v_cap - v0) ** 2 + (v_cap - v1) ** 2) / (2.0 * a_max)
+    return np.where(u <= v_cap, tent, cut)
+
+
+def _chain_ticks(d_mm, gap, start, window, knot_cap, v_cap, a_max, bins: int, count: int) -> int:
+    """A bound on a chain of gaps from one axis' motion (dynamic programming over knot speeds).
+
+    ``d_mm`` ``(g,)`` the axis' signed displacement per gap, ``gap`` ``(g,)`` each gap's own bound
+    (ticks), ``start`` ``(g,)`` bool: a new chain starts at this gap (its entry speed is free: the sum of
+    the chains' bounds). The axis' speed at every pulse lies in ``[-knot_cap, knot_cap]``, split into
+    ``bins`` intervals. The cost of gap ``i`` from interval ``I`` to interval ``J`` is the least
+    admissible count ``>= gap[i]`` at which *some* speeds in ``I`` and ``J`` admit a motion covering
+    ``d_i`` (``|a| <= A``, ``|v| <= v_cap``), so the cheapest path through the intervals is at most the
+    time of any motion (whose knot speeds lie in some intervals). Returns the sum over the chains.
+    """
+    f = window.tick_hz
+    g = d_mm.shape[0]
+    edges = np.linspace(-knot_cap, knot_cap, bins + 1)
+    p0, p1 = edges[:-1][:, None], edges[1:][:, None]  # entry interval (B, 1)
+    q0, q1 = edges[:-1][None, :], edges[1:][None, :]  # exit interval (1, B)
+    cost_to = np.zeros(bins)  # least ticks to reach each interval at the current knot
+    for s in range(0, g, CHAIN_CHUNK):  # chunks of gaps: (chunk, B, B) per candidate block
+        d = d_mm[s : s + CHAIN_CHUNK][:, None, None]
+        lo, hi = _candidates(window, gap[s : s + CHAIN_CHUNK], count)
+        cost = np.full((d.shape[0], bins, bins), -1, np.int64)
+        for j in range(count):
+            h = (hi[:, j] / f)[:, None, None]
+            # a count anywhere in the block: reach at its longest, and Dmax(h) >= Dmax(h_hi) - cap (h_hi - h)
+            # because dDmax/dh is the peak speed, at least max(v0, v1) >= -knot_cap
+            slack = knot_cap * (hi[:, j] - lo[:, j])[:, None, None] / f
+            Ah = a_max * h
+            ok = (p0 - q1 <= Ah) & (q0 - p1 <= Ah)  # some pair within reach of each other
+            # Dmax grows with both speeds: its maximum over the pairs in reach is at this corner
+            top = _dmax(np.minimum(p1, q1 + Ah), np.minimum(q1, p1 + Ah), h, v_cap, a_max) + slack
+            bot = -_dmax(-np.maximum(p0, q0 - Ah), -np.maximum(q0, p0 - Ah), h, v_cap, a_max) - slack
+            ok &= (bot <= d) & (d <= top) & (cost < 0)
+            cost = np.where(ok, lo[:, j][:, None, None], cost)
+            if j % 4 == 3 and not (cost < 0).any():
+                break
+        # beyond the enumerated counts: longer than the last block
+        cost = np.where(cost < 0, (hi[:, -1] + 1)[:, None, None], cost)
+        first = start[s : s + CHAIN_CHUNK]
+        for i in range(cost.shape[0]):  # min-plus, one gap at a time
+            if first[i]:
+                cost_to = np.full(bins, cost_to.min())
+            cost_to = np.min(cost_to[:, None] + cost[i], axis=0)
+    return int(cost_to.min())
