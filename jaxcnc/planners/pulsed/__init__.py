@@ -68,9 +68,13 @@ class PlannedPoints:
 
     @property
     def lower_bound_travel_s(self) -> float:
-        """A certified bound that also counts travel across gaps (:mod:`.bound`), at the machine's limits."""
+        """A certified bound that also counts travel across gaps (:mod:`.bound`), at the machine's limits:
+        the axes' ``v_max``/``a_max`` and the path limits the planners honour (feed at pulses, rapid)."""
         v_max, a_max, _ = machine_limits(self.machine)
-        return lower_bound_travel(self.job.points, self.window, v_max, a_max).seconds
+        path = self.machine.path
+        return lower_bound_travel(
+            self.job.points, self.window, v_max, a_max, feed_mm_s=path.feed, rapid_mm_s=path.rapid
+        ).seconds
 
 
 def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
