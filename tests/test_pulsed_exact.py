@@ -61,3 +61,37 @@ def test_infeasible_durations_are_refused():
     assert lower_bound_travel(pts, WIN, V, A).ticks > 238 + 1400 + 238
     assert not feasible_ticks(pts, np.array([238, 1400, 238]), WIN.tick_hz, V_REQ, A_REQ)
     assert feasible_ticks(pts, np.array([238, 2500, 238]), WIN.tick_hz, V_REQ, A_REQ)
+
+
+# --- at bang's caps: the path speed within the feed at every pulse, within the rapid everywhere ---
+
+V_AXES, _, _ = request_limits(GLASS)
+FEED, RAPID = with_margin(GLASS.path.feed), with_margin(GLASS.path.rapid)
+
+
+def test_path_caps_refused_below_the_path_bound_and_found_at_it():
+    """A 2 mm jump between two pulses: the axes alone cross it in two periods, within the feed at both pulses
+    it takes three (the path bound's tent); the verifying LP agrees on both sides, in 1-D and diagonally."""
+    for direction in (np.array([1.0, 0, 0]), np.array([0.6, 0.8, 0])):
+        pts = np.array([[0.0, 0, 0], 2.0 * direction])
+        at = lower_bound_travel(pts + 10, WIN, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid).ticks
+        assert at == 3 * WIN.n_min and lower_bound_travel(pts + 10, WIN, V, A).ticks == 2 * WIN.n_min
+        below = np.array([2 * WIN.n_max])
+        assert feasible_ticks(pts, below, WIN.tick_hz, V_AXES, A_REQ)
+        assert not feasible_ticks(pts, below, WIN.tick_hz, V_AXES, A_REQ, feed_mm_s=FEED, rapid_mm_s=RAPID)
+        assert feasible_ticks(pts, np.array([at + 4]), WIN.tick_hz, V_AXES, A_REQ, feed_mm_s=FEED, rapid_mm_s=RAPID)
+
+
+@pytest.mark.parametrize(("name", "start", "n"), [("sparse", 40, 16), ("short-rows", 0, 24)])
+def test_exact_at_bangs_caps_above_the_path_bound(name, start, n):
+    """The reference at bang's caps (descending over period counts) is a verified motion within those caps,
+    never below the certified path-limited bound; bang's plan on the window is printed beside it."""
+    pts = window(name, start, n)
+    planned = plan_points(PointJob(pts, None, np.arange(1, n + 1), name), GLASS, "bang")
+    bang_ticks = np.diff(planned.plan.work_tick)
+    ex = exact_window(pts, WIN, V_AXES, A_REQ, guess_ticks=bang_ticks, feed_mm_s=FEED, rapid_mm_s=RAPID, descend=True)
+    bound = lower_bound_travel(pts, WIN, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid)
+    print(f"{name}: bang {bang_ticks.sum()} exact {ex.ticks.sum()} bound {bound.ticks}")
+    assert bound.ticks <= ex.ticks.sum()
+    assert np.all(WIN.admissible(ex.ticks, ex.periods))
+    assert feasible_ticks(pts - pts[0], ex.ticks, WIN.tick_hz, V_AXES, A_REQ, feed_mm_s=FEED, rapid_mm_s=RAPID)

@@ -63,8 +63,12 @@ class ExactWindow:
         return float(self.ticks.sum()) / self.tick_hz
 
 
-def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol):
-    """Minimise the window's time with each ``h_g`` in ``[lo_s, hi_s]``; returns ``(h (g,), objective)``."""
+def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol, feed=None, rapid=None):
+    """Minimise the window's time with each ``h_g`` in ``[lo_s, hi_s]``; returns ``h`` ``(g,)``.
+
+    ``feed``/``rapid``: the path speed (Euclidean) at most ``feed`` at the pulses and ``rapid`` at every
+    step end (so everywhere: the speed is linear per step, its norm convex).
+    """
     g, dims = pts.shape[0] - 1, pts.shape[1]
     n = g * steps
     opti = ca.Opti()
@@ -81,6 +85,11 @@ def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol):
     for k in range(dims):
         opti.subject_to(opti.bounded(-a_max[k], a[:, k], a_max[k]))
         opti.subject_to(opti.bounded(-v_max[k], v[:, k], v_max[k]))
+    speed2 = ca.sum2(v * v)  # (n + 1, 1)
+    if rapid is not None:
+        opti.subject_to(speed2 <= rapid * rapid)
+    if feed is not None:
+        opti.subject_to(speed2[list(range(0, n + 1, steps))] <= feed * feed)
     opti.subject_to(opti.bounded(ca.DM(lo_s), h, ca.DM(hi_s)))
     opti.minimize(ca.sum1(h) / float(np.sum(guess_s)))
     # a start: the guess durations, positions interpolated linearly, speeds the mean speeds
@@ -88,6 +97,9 @@ def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol):
     knots = np.concatenate([[0.0], np.cumsum(guess_s)])
     p0 = np.column_stack([np.interp(t_guess, knots, pts[:, k]) for k in range(dims)])
     v0 = np.clip(np.gradient(p0, t_guess, axis=0), -v_max, v_max)
+    cap = min(x for x in (feed, rapid, np.inf) if x is not None)
+    if np.isfinite(cap):  # start inside the path caps
+        v0 = v0 * np.minimum(1.0, 0.9 * cap / np.maximum(np.linalg.norm(v0, axis=1, keepdims=True), 1e-12))
     opti.set_initial(h, guess_s)
     opti.set_initial(p, p0)
     opti.set_initial(v, v0)
@@ -102,14 +114,31 @@ def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol):
     return np.asarray(sol.value(h), dtype=np.float64).reshape(-1)
 
 
-def feasible_ticks(pts: np.ndarray, ticks: np.ndarray, tick_hz: float, v_max, a_max, steps: int = STEPS_PER_GAP):
+#: Sides of the polygon inside the circle of a path cap, in the plane of two moving axes.
+POLYGON_SIDES = 16
+
+
+def feasible_ticks(
+    pts: np.ndarray,
+    ticks: np.ndarray,
+    tick_hz: float,
+    v_max,
+    a_max,
+    steps: int = STEPS_PER_GAP,
+    feed_mm_s: float | None = None,
+    rapid_mm_s: float | None = None,
+) -> bool:
     """Whether a motion with ``steps`` constant accelerations per gap burns ``pts`` ``(n, d)`` at gaps ``ticks``.
 
-    One linear program per axis (HiGHS): unknowns the speeds at the step ends and the accelerations;
-    the speeds linear per step, so ``|v| <= V`` at the step ends holds everywhere. Free end speeds.
+    A linear program (HiGHS): unknowns the speeds at the step ends and the accelerations, each axis
+    ``|v| <= V``, ``|a| <= A``; the speeds linear per step, so the bounds at the step ends hold
+    everywhere. Free end speeds. Path caps (``feed_mm_s`` at every pulse, ``rapid_mm_s`` at every step
+    end) are kept *inside* the Euclidean ones, so a feasible answer is a real motion within them: one
+    moving axis, its box; two, a polygon of :data:`POLYGON_SIDES` sides inside the circle; three, each
+    axis within ``cap / √3``. Without path caps the axes are independent (one program each).
     """
     from scipy.optimize import linprog
-    from scipy.sparse import bmat, coo_matrix
+    from scipy.sparse import block_diag, bmat, coo_matrix, csr_matrix, hstack, vstack
 
     g = ticks.shape[0]
     n = g * steps
@@ -124,20 +153,56 @@ def feasible_ticks(pts: np.ndarray, ticks: np.ndarray, tick_hz: float, v_max, a_
     pos_v = coo_matrix((tau, (gap, j)), (g, n + 1))
     pos_a = coo_matrix((0.5 * tau * tau, (gap, j)), (g, n))
     A_eq = bmat([[dyn_v, dyn_a], [pos_v, pos_a]]).tocsr()
-    for k in range(pts.shape[1]):
-        D = np.diff(pts[:, k])
-        if not np.isfinite(a_max[k]) and not np.isfinite(v_max[k]):
-            continue
-        res = linprog(
-            np.zeros(2 * n + 1),
-            A_eq=A_eq,
-            b_eq=np.concatenate([np.zeros(n), D]),
-            bounds=[(-v_max[k], v_max[k])] * (n + 1) + [(-a_max[k], a_max[k])] * n,
-            method="highs",
-        )
-        if res.status != 0:
-            return False
-    return True
+    moving = [k for k in range(pts.shape[1]) if np.any(np.diff(pts[:, k]) != 0)]
+    caps = np.full(n + 1, np.inf)  # the path cap at each step end
+    if rapid_mm_s is not None:
+        caps[:] = rapid_mm_s
+    if feed_mm_s is not None:
+        caps[::steps] = np.minimum(caps[::steps], feed_mm_s)
+    if not np.isfinite(caps).any() or len(moving) <= 1:
+        for k in moving:
+            D = np.diff(pts[:, k])
+            if not np.isfinite(a_max[k]) and not np.isfinite(v_max[k]):
+                continue
+            vb = np.minimum(v_max[k], caps)
+            res = linprog(
+                np.zeros(2 * n + 1),
+                A_eq=A_eq,
+                b_eq=np.concatenate([np.zeros(n), D]),
+                bounds=[(-c, c) for c in vb] + [(-a_max[k], a_max[k])] * n,
+                method="highs",
+            )
+            if res.status != 0:
+                return False
+        return True
+    m = len(moving)
+    size = 2 * n + 1
+    b_eq = np.concatenate([np.concatenate([np.zeros(n), np.diff(pts[:, k])]) for k in moving])
+    if m == 2:  # the polygon's sides: c·v_x + s·v_y <= cap cos(pi/N)
+        ang = np.arange(POLYGON_SIDES) * 2 * np.pi / POLYGON_SIDES
+        pick = [csr_matrix(hstack([np.eye(n + 1), csr_matrix((n + 1, n))])) for _ in moving]
+        rows = [hstack([np.cos(t) * pick[0], np.sin(t) * pick[1]]) for t in ang]
+        A_ub = vstack(rows).tocsr()
+        keep = np.tile(np.isfinite(caps), POLYGON_SIDES)
+        A_ub, b_ub = A_ub[keep], np.tile(caps * np.cos(np.pi / POLYGON_SIDES), POLYGON_SIDES)[keep]
+        box = [np.full(n + 1, np.inf)] * m
+    else:  # three axes: each within cap / sqrt(3)
+        A_ub, b_ub = None, None
+        box = [caps / np.sqrt(3.0)] * m
+    bounds = []
+    for i, k in enumerate(moving):
+        vb = np.minimum(v_max[k], box[i])
+        bounds += [(-c, c) for c in vb] + [(-a_max[k], a_max[k])] * n
+    res = linprog(
+        np.zeros(m * size),
+        A_ub=A_ub,
+        b_ub=b_ub,
+        A_eq=block_diag([A_eq] * m).tocsr(),
+        b_eq=b_eq,
+        bounds=bounds,
+        method="highs",
+    )
+    return res.status == 0
 
 
 def exact_window(
@@ -148,11 +213,18 @@ def exact_window(
     guess_ticks: np.ndarray | None = None,
     steps: int = STEPS_PER_GAP,
     tol: float = 1e-8,
+    feed_mm_s: float | None = None,
+    rapid_mm_s: float | None = None,
+    descend: bool = False,
 ) -> ExactWindow:
     """The reference for ``points`` ``(n, 3)`` mm burned in this order (see the module docstring).
 
     ``v_max``, ``a_max`` ``(3,)`` the axis limits the motion keeps (finite); ``guess_ticks`` ``(n-1,)`` a
     starting point for the durations (e.g. a planner's), else one period or the velocity bound per gap.
+    ``feed_mm_s``/``rapid_mm_s``: the path limits ``bang`` keeps (speed at most the feed at the pulses,
+    the rapid everywhere; Euclidean in the program, a polygon inside them in the verifying LP).
+    ``descend``: then each gap with idle pulses is offered one period fewer (its longest count), kept
+    where the LP still finds a motion — one pass in order, each answer a verified motion.
     """
     ca = import_optional("casadi")
     f, n_min, n_max, idle = window.tick_hz, window.n_min, window.n_max, window.idle_pulses
@@ -168,17 +240,34 @@ def exact_window(
         guess_ticks = snap_up_ticks(np.ceil(np.maximum(2.0 * t_v, n_min)).astype(np.int64), n_min, n_max, idle)[0]
     guess_s = np.asarray(guess_ticks, dtype=np.float64) / f
     big = np.full(g, 1e3)
-    h = _nlp(ca, pts, np.full(g, n_min / f), big, guess_s, V, A, steps, tol)
+    caps = {"feed": feed_mm_s, "rapid": rapid_mm_s}
+    h = _nlp(ca, pts, np.full(g, n_min / f), big, guess_s, V, A, steps, tol, **caps)
     relaxed_s = float(h.sum())
     m = np.maximum(np.ceil(h * f / n_max - 1e-9), 1).astype(np.int64) if idle else np.ones(g, np.int64)
     try:
-        h2 = _nlp(ca, pts, m * n_min / f, m * n_max / f, np.clip(h, m * n_min / f, m * n_max / f), V, A, steps, tol)
+        lo, hi = m * n_min / f, m * n_max / f
+        h2 = _nlp(ca, pts, lo, hi, np.clip(h, lo, hi), V, A, steps, tol, **caps)
     except PlanningError:  # those period counts admit no motion: round the relaxed durations instead
         h2 = h
     base = np.ceil(h2 * f - 1e-6).astype(np.int64)
     for i in range(200):
         stretch = 1.0 + 1e-3 * i
         ticks, periods = snap_up_ticks(np.ceil(base * stretch).astype(np.int64), n_min, n_max, idle)
-        if feasible_ticks(pts, ticks, f, V, A, steps):
+        if feasible_ticks(pts, ticks, f, V, A, steps, feed_mm_s, rapid_mm_s):
+            if descend and idle:
+                ticks = _descend(pts, ticks, window, V, A, steps, feed_mm_s, rapid_mm_s)
+                periods = snap_up_ticks(ticks, n_min, n_max, idle)[1]
             return ExactWindow(relaxed_s, ticks, periods, f, stretch)
     raise PlanningError("no feasible rounding of the exact reference's durations within 20 %")
+
+
+def _descend(pts, ticks, window, V, A, steps, feed_mm_s, rapid_mm_s) -> np.ndarray:
+    """One pass over the gaps with idle pulses: one period fewer (at its longest count) where still feasible."""
+    ticks = ticks.copy()
+    periods = snap_up_ticks(ticks, window.n_min, window.n_max, True)[1]
+    for i in np.flatnonzero(periods > 1):
+        trial = ticks.copy()
+        trial[i] = min(ticks[i] - 1, (periods[i] - 1) * window.n_max)
+        if feasible_ticks(pts, trial, window.tick_hz, V, A, steps, feed_mm_s, rapid_mm_s):
+            ticks = trial
+    return ticks
