@@ -116,6 +116,8 @@ def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol, feed=None, rapi
 
 #: Sides of the polygon inside the circle of a path cap, in the plane of two moving axes.
 POLYGON_SIDES = 16
+#: With three moving axes, the least-moving one's share of a path cap (the other two share the rest).
+Z_SHARE = 0.3
 
 
 def feasible_ticks(
@@ -134,8 +136,9 @@ def feasible_ticks(
     ``|v| <= V``, ``|a| <= A``; the speeds linear per step, so the bounds at the step ends hold
     everywhere. Free end speeds. Path caps (``feed_mm_s`` at every pulse, ``rapid_mm_s`` at every step
     end) are kept *inside* the Euclidean ones, so a feasible answer is a real motion within them: one
-    moving axis, its box; two, a polygon of :data:`POLYGON_SIDES` sides inside the circle; three, each
-    axis within ``cap / √3``. Without path caps the axes are independent (one program each).
+    moving axis, its box; two, a polygon of :data:`POLYGON_SIDES` sides inside the circle; three, the
+    least-moving axis within :data:`Z_SHARE` of the cap and the polygon inside the rest.
+    Without path caps the axes are independent (one program each).
     """
     from scipy.optimize import linprog
     from scipy.sparse import block_diag, bmat, coo_matrix, csr_matrix, hstack, vstack
@@ -178,17 +181,24 @@ def feasible_ticks(
     m = len(moving)
     size = 2 * n + 1
     b_eq = np.concatenate([np.concatenate([np.zeros(n), np.diff(pts[:, k])]) for k in moving])
-    if m == 2:  # the polygon's sides: c·v_x + s·v_y <= cap cos(pi/N)
-        ang = np.arange(POLYGON_SIDES) * 2 * np.pi / POLYGON_SIDES
-        pick = [csr_matrix(hstack([np.eye(n + 1), csr_matrix((n + 1, n))])) for _ in moving]
-        rows = [hstack([np.cos(t) * pick[0], np.sin(t) * pick[1]]) for t in ang]
-        A_ub = vstack(rows).tocsr()
-        keep = np.tile(np.isfinite(caps), POLYGON_SIDES)
-        A_ub, b_ub = A_ub[keep], np.tile(caps * np.cos(np.pi / POLYGON_SIDES), POLYGON_SIDES)[keep]
-        box = [np.full(n + 1, np.inf)] * m
-    else:  # three axes: each within cap / sqrt(3)
-        A_ub, b_ub = None, None
-        box = [caps / np.sqrt(3.0)] * m
+    # the two axes that move most share a polygon of radius r (inside the circle); a third gets a box of
+    # Z_SHARE x the cap, r = sqrt(1 - Z_SHARE^2) x the cap, so the speed stays within the ball
+    order = sorted(range(m), key=lambda i: -np.abs(np.diff(pts[:, moving[i]])).sum())
+    r = 1.0 if m == 2 else np.sqrt(1.0 - Z_SHARE**2)
+    ang = np.arange(POLYGON_SIDES) * 2 * np.pi / POLYGON_SIDES
+    zero = csr_matrix((n + 1, size))
+    pick = [hstack([np.eye(n + 1), csr_matrix((n + 1, n))]) for _ in moving]
+    rows = []
+    for t in ang:
+        blocks = [zero] * m
+        blocks[order[0]], blocks[order[1]] = np.cos(t) * pick[0], np.sin(t) * pick[1]
+        rows.append(hstack(blocks))
+    keep = np.tile(np.isfinite(caps), POLYGON_SIDES)
+    A_ub = vstack(rows).tocsr()[keep]
+    b_ub = np.tile(caps * r * np.cos(np.pi / POLYGON_SIDES), POLYGON_SIDES)[keep]
+    box = [np.full(n + 1, np.inf)] * m
+    if m == 3:
+        box[order[2]] = caps * Z_SHARE
     bounds = []
     for i, k in enumerate(moving):
         vb = np.minimum(v_max[k], box[i])
