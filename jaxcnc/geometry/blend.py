@@ -326,6 +326,7 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
     frozen = np.zeros(len(spans), bool)  # spans left as they are: no snap, their own curvature
     for _ in range(CHAIN_ROUNDS + 1):
+        pts = found = None  # the last round's (J, 6, 3) points and kernel outputs: dead before the new ones
         ell_a, ell_b = ell.copy(), ell.copy()
         _consume(spans, j, ell_a, ell_b, frozen)
         k_mid = _chain_curvature(spans, j, ell_a, ell_b)
@@ -342,19 +343,22 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
             break
         frozen[j[bad]] = frozen[j[bad] + 1] = True  # give up the snap and the chain curvature there
     else:  # still too far: plain symmetric blends everywhere (within tol by construction or measurement)
+        pts = found = None
         ell_a, ell_b, k_mid = ell.copy(), ell.copy(), None
         pts, ta, tb = _blend_points(spans, j, ell_a, ell_b)
         found = _kernel(pts, corner)
+    del k_mid, corner, frozen, dev, changed
     fields_, table, owner = _blend_fields(spans, j, pts, found, ta, tb)
+    del pts, found, ta, tb  # the blends' fields hold what is kept of them
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
     trimmed, arcs = _trim(spans, trim_start, trim_end)
+    del trim_start, trim_end
     alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
-    cols = {k: np.concatenate([trimmed[k][alive], fields_[k]]) for k in trimmed}
     # a blend's pieces before its second span, in order
     key = np.concatenate(
         [np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))]
     )
-    return assemble(cols, key, arcs, merge_polys([spans.polys, table]))
+    return assemble([(trimmed, alive), (fields_, None)], key, arcs, merge_polys([spans.polys, table]))
 
 
 def _blend_fields(
@@ -381,7 +385,7 @@ def _blend_fields(
         key = np.concatenate([key[bad], key[bad] + width])
         found = _kernel(pts, pts[:, 0])
     if len(parts) == 1 and parts[0][2].all():  # no blend split: the kernel's arrays, in order already
-        out = dict(parts[0][0], origin=parts[0][1][:, 0], owner=parts[0][3])
+        out = dict(parts[0][0], origin=parts[0][1][:, 0].copy(), owner=parts[0][3])  # (a view would hold pts)
     else:  # the pieces of every round, ordered by key; one field at a time (bounded extra memory)
         order = np.argsort(np.concatenate([p[4][p[2]] for p in parts]), kind="stable")
         out = {}
@@ -419,7 +423,8 @@ def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[d
     arrays = span_arrays(spans)
     idx = np.arange(len(spans))
     cut = (trim_start > 0) | (trim_end > 0)
-    out = {k: np.array(getattr(spans, k)) for k in SPAN_FIELDS}
+    changed = ("origin", "tangent_in", "tangent_out", "length", "lo", "hi")  # copied; the others as they are
+    out = {k: np.array(getattr(spans, k)) if k in changed else getattr(spans, k) for k in SPAN_FIELDS}
     if not cut.any():
         return out, spans.arcs
     c = np.flatnonzero(cut)

@@ -321,6 +321,8 @@ def merge_polys(tables: list[PolyTable]) -> PolyTable:
     tables = [t for t in tables if len(t)]
     if not tables:
         return empty_polys()
+    if len(tables) == 1 and tables[0].degree in DEGREE_BUCKETS:
+        return tables[0]  # nothing to join or elevate: no copy
     degree = next(d for d in DEGREE_BUCKETS if d >= max(t.degree for t in tables))
     return PolyTable(
         coeffs=np.concatenate([elevate(t.coeffs, degree) for t in tables]),
@@ -329,15 +331,43 @@ def merge_polys(tables: list[PolyTable]) -> PolyTable:
     )
 
 
-def assemble(cols: dict[str, np.ndarray], order_key: np.ndarray, arcs: ArcTable, polys: PolyTable) -> Spans:
-    """:class:`Spans` from span field columns (``item`` included), sorted by ``order_key`` (stable)."""
+#: Dtypes of the span fields that are not float64.
+_FIELD_DTYPES = {"kind": np.int8, "block": np.int32, "item": np.int32}
+
+
+def assemble(
+    parts: list[tuple[dict[str, np.ndarray], np.ndarray | None]],
+    order_key: np.ndarray,
+    arcs: ArcTable,
+    polys: PolyTable,
+) -> Spans:
+    """:class:`Spans` from parts of span field columns (``item`` included), sorted by ``order_key`` (stable).
+
+    ``parts``: ``(columns, rows)`` each; ``rows`` selects the part's rows that are kept (``None``: all), and
+    ``order_key`` has one entry per kept row, the parts' kept rows concatenated in order. Each field is
+    placed straight into its sorted position and dropped from its part's dict (the parts are consumed), so
+    beside the result at most one field of one part is copied at a time.
+    """
     order = np.argsort(order_key, kind="stable")
-    out = {k: np.ascontiguousarray(np.asarray(cols[k])[order]) for k in SPAN_FIELDS}
-    out["kind"] = out["kind"].astype(np.int8)
-    out["block"] = out["block"].astype(np.int32)
-    out["item"] = out["item"].astype(np.int32)
-    for v in out.values():
-        v.setflags(write=False)
+    n = order.size
+    pos = np.empty(n, np.int64)
+    pos[order] = np.arange(n)  # where each kept row goes
+    del order
+    out = {}
+    for key in SPAN_FIELDS:
+        cols = [np.asarray(p[key]) for p, _ in parts]
+        dtype = _FIELD_DTYPES.get(key, np.result_type(*cols))
+        a = np.empty((n,) + cols[0].shape[1:], dtype)
+        del cols
+        at = 0
+        for p, rows in parts:
+            v = np.asarray(p.pop(key))
+            v = v if rows is None else v[rows]
+            a[pos[at : at + v.shape[0]]] = v
+            at += v.shape[0]
+            del v
+        a.setflags(write=False)
+        out[key] = a
     return Spans(**out, arcs=arcs, polys=polys)
 
 
@@ -346,7 +376,8 @@ def concat_spans(
 ) -> Spans:
     """Assemble span fields (each part with its side table rows, or ``None``) into :class:`Spans`.
 
-    ``order_key``: one sortable key per span of all parts (concatenated), giving the path order.
+    ``order_key``: one sortable key per span of all parts (concatenated), giving the path order. The parts'
+    field dicts are consumed (see :func:`assemble`).
     """
     arcs, polys, items = [], [], []
     n_arcs = n_polys = 0
@@ -362,14 +393,14 @@ def concat_spans(
             n_polys += len(table)
         else:
             items.append(np.full(n, -1))
-    cols = {key: np.concatenate([np.asarray(f[key]) for f, _ in parts]) for key in SPAN_FIELDS if key != "item"}
-    cols["item"] = np.concatenate(items)
+    for (fields_, _), item in zip(parts, items, strict=True):
+        fields_["item"] = item
     arc_table = (
         ArcTable(**{f.name: np.concatenate([getattr(a, f.name) for a in arcs]) for f in fields(ArcTable)})
         if arcs
         else empty_arcs()
     )
-    return assemble(cols, order_key, arc_table, merge_polys(polys))
+    return assemble([(f, None) for f, _ in parts], order_key, arc_table, merge_polys(polys))
 
 
 def program_spans(program: Program) -> Spans:
@@ -407,3 +438,51 @@ def pad_spans(spans: Spans, n: int) -> Spans:
         a = getattr(spans, key)
         out[key] = np.concatenate([a, np.full((extra,) + a.shape[1:], fill.get(key, 0.0), dtype=a.dtype)])
     return Spans(**out, arcs=spans.arcs, polys=spans.polys)
+
+
+def slice_spans(spans: Spans, first: int, last: int) -> Spans:
+    """Spans ``first..last-1`` as a :class:`Spans` of their own: row ``k`` is span ``first + k``, with the arc and
+    poly rows they use (``item`` renumbered into those). The span fields are views; the side tables' rows copies."""
+    out = {key: getattr(spans, key)[first:last] for key in SPAN_FIELDS}
+    kind, item = out["kind"], out["item"].copy()
+    arcs, polys = spans.arcs, spans.polys
+    is_arc = (kind == SpanKind.ARC) & (item >= 0)
+    is_poly = np.isin(kind, POLY_KINDS) & (item >= 0)
+    arc_rows, poly_rows = item[is_arc], item[is_poly]
+    item[is_arc] = np.arange(arc_rows.size)
+    item[is_poly] = np.arange(poly_rows.size)
+    item.setflags(write=False)
+    out["item"] = item
+    sub_arcs = ArcTable(**{f.name: getattr(arcs, f.name)[arc_rows] for f in fields(ArcTable)})
+    sub_polys = PolyTable(
+        coeffs=polys.coeffs[poly_rows], timing=polys.timing[poly_rows], length_err=polys.length_err[poly_rows]
+    )
+    return Spans(**out, arcs=sub_arcs, polys=sub_polys)
+
+
+def pad_tables(spans: Spans, n_arcs: int, n_polys: int) -> Spans:
+    """``spans`` with its arc and poly tables padded to ``n_arcs`` / ``n_polys`` rows (rows no span refers to:
+    a unit circle, a straight quintic), so that compiled kernels see few table sizes."""
+    arcs, polys = spans.arcs, spans.polys
+    k, q = n_arcs - len(arcs), n_polys - len(polys)
+    if k < 0 or q < 0:
+        raise ValueError("cannot pad to fewer rows")
+    unit = dict(center=(0, 0, 0), e1=(1, 0, 0), e2=(0, 1, 0), axis=(0, 0, 1), radius=1, rise=0, sweep=1)
+    pad_arcs = ArcTable(
+        **{
+            name: np.concatenate([getattr(arcs, name), np.broadcast_to(np.asarray(v, np.float64), (k,) + np.shape(v))])
+            for name, v in unit.items()
+        }
+    )
+    line = np.zeros(polys.coeffs.shape[1:])
+    line[0, 3] = 1.0  # weight 1
+    if line.shape[0] > 1:
+        line[1, 0] = 1.0  # x = u
+    timing = np.zeros(6)
+    timing[1] = 1.0  # u = s / length
+    pad_polys = PolyTable(
+        coeffs=np.concatenate([polys.coeffs, np.broadcast_to(line, (q,) + line.shape)]),
+        timing=np.concatenate([polys.timing, np.broadcast_to(timing, (q, 6))]),
+        length_err=np.concatenate([polys.length_err, np.zeros(q)]),
+    )
+    return Spans(**{key: getattr(spans, key) for key in SPAN_FIELDS}, arcs=pad_arcs, polys=pad_polys)

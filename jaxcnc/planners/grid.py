@@ -36,7 +36,7 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
-from jaxcnc.geometry.spans import Spans, pad_spans
+from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, slice_spans
 
 MAX_TURN_RAD = 0.0175  # 1°
 #: A boxed (blend) interval turns at most this much, and a blend piece has at least this many
@@ -108,9 +108,14 @@ def path_frame(arrays: dict, span: jnp.ndarray, s: jnp.ndarray, order: int = 2) 
     return evaluate_path(arrays, span, s, order, xp=jnp)[1:]
 
 
-def device_spans(spans: Spans) -> dict[str, jnp.ndarray]:
-    """The span arrays :func:`frames_at` reads, padded to a bucket (upload once, query often)."""
-    return span_arrays(pad_spans(spans, bucket_size(len(spans))), xp=jnp)
+def device_spans(spans: Spans, first: int = 0, last: int | None = None) -> dict[str, jnp.ndarray]:
+    """The arrays :func:`frames_at` reads for spans ``first..last-1`` (all by default; row ``k`` is span
+    ``first + k``): only those spans and the arc and poly rows they use, each table padded to a bucket, so
+    that a window of a long program uploads its own rows alone and the compiled kernels see few sizes."""
+    last = len(spans) if last is None else last
+    sub = spans if (first, last) == (0, len(spans)) else slice_spans(spans, first, last)
+    sub = pad_tables(sub, *(bucket_size(len(t)) if len(t) else 0 for t in (sub.arcs, sub.polys)))
+    return span_arrays(pad_spans(sub, bucket_size(len(sub))), xp=jnp)
 
 
 def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray, order: int = 2) -> tuple[np.ndarray, ...]:
@@ -163,7 +168,8 @@ def build_grid(
     """Cut spans ``first..last-1`` (all by default) into ``counts[k]`` equal intervals each and evaluate the
     frame at their ends.
 
-    ``arrays``: :func:`device_spans` of ``spans`` when the caller has them already.
+    ``arrays``: :func:`device_spans` of ``spans`` for the same ``first``, ``last`` when the caller has them
+    already (row 0 is span ``first``).
     """
     last = len(spans) if last is None else last
     counts = counts[first:last]
@@ -184,15 +190,15 @@ def build_grid(
     plain = np.flatnonzero(curved & ~boxed)
     box = np.flatnonzero(boxed)
     if plain.size or box.size:
-        arrays = device_spans(spans) if arrays is None else arrays
+        arrays = device_spans(spans, first, last) if arrays is None else arrays
     if plain.size:
-        t, k = frames_at(arrays, np.concatenate([span[plain]] * 2), np.concatenate([s_start[plain], s_end[plain]]))
+        t, k = frames_at(arrays, np.concatenate([local[plain]] * 2), np.concatenate([s_start[plain], s_end[plain]]))
         t_a[plain], t_b[plain] = t[: plain.size], t[plain.size :]
         k_a[plain], k_b[plain] = k[: plain.size], k[plain.size :]
     t_lo, t_hi, k_lo, k_hi = t_a.copy(), t_a.copy(), k_a.copy(), k_a.copy()
     if box.size:
         t_a[box], k_a[box], t_b[box], k_b[box], t_lo[box], t_hi[box], k_lo[box], k_hi[box] = boxes_at(
-            arrays, span[box], s_start[box], delta[box]
+            arrays, local[box], s_start[box], delta[box]
         )
     return Grid(
         span=span,

@@ -219,19 +219,20 @@ def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
     return {k: out[k] for k in ("group_tick", "offset_ticks", "first_tick", "n_ticks")}
 
 
-def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray) -> np.ndarray:
+def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray, first: int = 0) -> np.ndarray:
     """``(m,)`` bool: on a curved interval the planned acceleration may exceed the budget inside.
 
     The limit holds at both ends by construction. Inside, ``q̈ = T(s) u + K(s) x(s)`` is
     evaluated at the midpoint too; the parabola through the three values bounds it (``T``, ``K``
     vary smoothly and little on an interval), and an interval whose parabola peaks above
-    ``1 - GRID_MARGIN/2`` of the budget is cut finer. ``arrays``: :func:`~jaxcnc.planners.grid.device_spans`.
+    ``1 - GRID_MARGIN/2`` of the budget is cut finer. ``arrays``: :func:`~jaxcnc.planners.grid.device_spans`
+    of the spans from ``first`` on (row 0 is span ``first``).
     """
     idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
     bad = np.zeros(len(grid), bool)
     if idx.size == 0:
         return bad
-    t_m, k_m = frames_at(arrays, grid.span[idx], grid.s_start[idx] + grid.delta[idx] / 2)
+    t_m, k_m = frames_at(arrays, grid.span[idx] - first, grid.s_start[idx] + grid.delta[idx] / 2)
     xa, xb = x_node[idx], x_node[idx + 1]
     u = (xb - xa) / (2.0 * grid.delta[idx])
     a0 = grid.t_a[idx] * u[:, None] + grid.k_a[idx] * xa[:, None]
@@ -261,14 +262,13 @@ def plan_topp(req: PlanRequest) -> Plan:
         return plan_lookahead(req)
     n = len(spans)
     counts = hold_counts(req, interval_counts(spans))
-    arrays = device_spans(spans) if is_curved(spans.kind).any() else None  # uploaded once for all windows
     facts = _ProgramFacts.of(req)
     pieces = []
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
     while first < n:
         reach = np.cumsum(counts[first:])
         last = min(n, first + max(1, int(np.searchsorted(reach, window, side="right"))))
-        grid, out = _solve_refined(req, facts, counts, arrays, first, last, x_start)
+        grid, out = _solve_refined(req, facts, counts, first, last, x_start)
         m = len(grid)
         if last == n:
             commit = m  # the program ends at rest: every node is the whole program's
@@ -328,15 +328,18 @@ class _ProgramFacts:
 
 
 def _solve_refined(
-    req: PlanRequest, facts: _ProgramFacts, counts: np.ndarray, arrays, first: int, last: int, x_start: float
+    req: PlanRequest, facts: _ProgramFacts, counts: np.ndarray, first: int, last: int, x_start: float
 ) -> tuple[Grid, dict[str, np.ndarray]]:
     """Grid and plan of spans ``first..last-1``, cutting curved spans finer (``counts``, in place) until the
-    interior check passes."""
+    interior check passes. Only this window's spans are uploaded for the grid's evaluations (the working
+    memory of a window does not grow with the program)."""
+    curved = bool(is_curved(req.spans.kind[first:last]).any())
+    arrays = device_spans(req.spans, first, last) if curved else None
     for _ in range(MAX_REFINE):
         grid = build_grid(req.spans, counts, arrays, first, last)
         out = _solve_grid(req, facts, grid, x_start)
         acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
-        bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc)
+        bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first)
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
