@@ -73,6 +73,50 @@ def test_lines_sequential_scan_equals_associative_scan():
     np.testing.assert_allclose(np.asarray(solve(*args, True)), np.asarray(solve(*args, False)), rtol=1e-9, atol=1e-6)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_band_forms_equal_the_row_pair_forms_bit_for_bit(seed):
+    """Without boxes the passes use the band forms: the same static cap and steps bit for bit, the same plan."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxcnc.planners import phaseplane as pp
+
+    rng = np.random.default_rng(seed)
+    m = 300
+    t_a, t_b = rng.normal(size=(m, 3)), rng.normal(size=(m, 3))
+    k_a, k_b = rng.normal(size=(m, 3)) * 0.5, rng.normal(size=(m, 3)) * 0.5
+    for arr in (t_a, t_b, k_a, k_b):  # axes that do not move, tiny tangents, straight pieces
+        arr[rng.random((m, 3)) < 0.15] = 0.0
+    t_a[rng.random((m, 3)) < 0.05] = 1e-13
+    delta = rng.uniform(0.001, 1.0, m)
+    delta[rng.random(m) < 0.05] = 0.0  # points
+    acc = np.tile([1000.0, 800.0, np.inf], (m, 1))
+    acc[:, 2] = 500.0
+    cap = rng.uniform(0.0, 1e4, m + 1)
+    cap[0] = cap[-1] = 0.0
+    rows = pp.constraint_rows(*(jnp.asarray(a) for a in (delta, t_a, k_a, t_b, k_b, acc, cap[1:])))
+    d, cap_a = jnp.asarray(delta), jnp.asarray(cap[:-1])
+    np.testing.assert_array_equal(pp.static_cap(*rows, cap_a), pp.static_cap_bands(*rows, cap_a))
+    for k_b in (0.0, 1.0, 37.5, 1e4):  # the steps as maps of K_b and x_a
+        back = [
+            jnp.min(jnp.stack([a * k_b + b for a, b in zip(*f(*rows, d), strict=True)]), 0)
+            for f in (pp.backward_pieces, pp.backward_pieces_bands)
+        ]
+        fwd = [
+            jnp.min(jnp.stack([a * k_b + b for a, b in zip(*f(*rows, d), strict=True)]), 0)
+            for f in (pp.forward_pieces, pp.forward_pieces_bands)
+        ]
+        np.testing.assert_array_equal(*back)
+        np.testing.assert_array_equal(*fwd)
+    # compiled, the two programs may contract a multiply-add differently: the last bit may differ
+    solve = jax.jit(pp.solve_window, static_argnames=("curved", "bands"))
+    plain = solve(rows, d, cap_a, jnp.zeros(()), True)
+    banded = solve(rows, d, cap_a, jnp.zeros(()), True, bands=True)
+    np.testing.assert_allclose(banded[0], plain[0], rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(banded[1], plain[1])
+    assert float(jnp.max(plain[0])) > 0  # the job moves
+
+
 def _polyline_distance(p: np.ndarray, pts: np.ndarray) -> np.ndarray:
     d = np.full(len(p), np.inf)
     for a, b in zip(pts[:-1], pts[1:], strict=True):

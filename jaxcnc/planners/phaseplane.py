@@ -161,6 +161,57 @@ def static_cap(gu: list, gx: list, h: list, cap_a: jnp.ndarray) -> jnp.ndarray:
     return jnp.maximum(best, 0.0)
 
 
+def _bands(gu: list, gx: list, h: list) -> list[tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray, jnp.ndarray]]:
+    """The axis rows of :func:`constraint_rows` without a box as *bands*, one per axis and end.
+
+    Without a box an axis' four rows are ``±(T u + K x) ≤ A`` at the start and at the end: the same ``T``,
+    ``K`` with both signs, i.e. ``|T u + K x| ≤ A``, the band ``u ∈ [-w - r x, w - r x]`` with ``r = K/T``
+    and ``w = A/|T|`` where ``|T| > GU_EPS``. Returns ``(active, r, w, A, K)`` per band (lists of ``(m,)``).
+    ``r`` and ``w`` are computed with exactly the operations the row-pair forms use (``(-K)/(-T)`` is
+    ``K/T`` in floating point, ``-A/(-|T|)`` is ``A/|T|``), so the band forms below give the same bits
+    (compiled, a pass may still contract a multiply-add differently: the plan agrees to the last bit or so).
+    """
+    bands = []
+    for i in range(0, len(gu) - 2, 4):
+        for t, k, a in ((gu[i], gx[i], h[i]), (gu[i + 1], gx[i + 1], h[i + 1])):
+            active = jnp.abs(t) > GU_EPS
+            t_abs = jnp.where(active, jnp.abs(t), 1.0)
+            r = k / jnp.where(active, t, 1.0)
+            bands.append((active, r, a / t_abs, a, k))
+    return bands
+
+
+def static_cap_bands(gu: list, gx: list, h: list, cap_a: jnp.ndarray) -> jnp.ndarray:
+    """:func:`static_cap` of rows without a box, from the bands (the same value; ~a quarter of the work).
+
+    Two bands ``p, q`` leave some ``u`` iff ``w_p - r_p x ≥ -w_q - r_q x`` both ways, i.e.
+    ``x |r_p - r_q| ≤ w_p + w_q`` (the pairs of one band's upper with the other's lower row); a band with
+    ``|T| ≤ GU_EPS`` bounds ``x`` alone, ``|K| x ≤ A``; the row ``x_b ≥ 0`` is the lower row
+    ``u ≥ -x/(2Δ)`` (``r_z = 1/(2Δ)``, ``w_z = 0``), against each band's upper row
+    ``x (r_p - r_z) ≤ w_p``. Pairs within one band have ``r_p = r_q`` and bound nothing.
+    """
+    bands = _bands(gu, gx, h)
+    best = cap_a
+    for active, _, _, a_lim, k in bands:  # |T| ≤ GU_EPS: the rows bound x alone, |K| x ≤ A
+        flat = ~active & (jnp.abs(k) > 0)
+        best = jnp.minimum(best, jnp.where(flat, a_lim / jnp.where(flat, jnp.abs(k), 1.0), jnp.inf))
+    for p in range(len(bands)):
+        ap, rp, wp, _, _ = bands[p]
+        for q in range(p + 1, len(bands)):
+            aq, rq, wq, _, _ = bands[q]
+            coef = jnp.abs(rp - rq)
+            ok = ap & aq & (coef > 0)
+            best = jnp.minimum(best, jnp.where(ok, (wp + wq) / jnp.where(ok, coef, 1.0), jnp.inf))
+    two_d = -gu[-1]  # the row x_b ≥ 0 is (-2Δ) u + (-1) x ≤ 0
+    z_on = two_d > GU_EPS
+    r_z = gx[-1] / jnp.where(z_on, gu[-1], 1.0)
+    for active, rp, wp, _, _ in bands:
+        coef = rp - r_z
+        ok = active & z_on & (coef > 0)
+        best = jnp.minimum(best, jnp.where(ok, wp / jnp.where(ok, coef, 1.0), jnp.inf))
+    return jnp.maximum(best, 0.0)
+
+
 def backward_pieces(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[list, list]:
     """Slopes and intercepts (lists of ``(m,)``): ``K_a = min(x_static, min_j (α_j K_b + β_j))``.
 
@@ -191,6 +242,37 @@ def forward_pieces(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[lis
         a_list.append(jnp.where(up, 1.0 - x * inv, 0.0))
         b_list.append(jnp.where(up, hh * inv, jnp.inf))
     return a_list, b_list
+
+
+def backward_pieces_bands(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[list, list]:
+    """:func:`backward_pieces` of rows without a box: one piece per band (its lower row), the same step."""
+    inv = jnp.where(delta > 0, 0.5 / jnp.where(delta > 0, delta, 1.0), 0.0)
+    alpha, beta = [], []
+    for active, r, _, a_lim, _ in _bands(gu, gx, h):
+        t_abs = jnp.abs(_band_t(gu, len(alpha)))
+        coef = inv - jnp.where(active, r, 0.0)
+        use = active & (coef > 0) & (inv > 0)
+        alpha.append(jnp.where(use, inv / jnp.where(use, coef, 1.0), 0.0))
+        beta.append(jnp.where(use, a_lim / jnp.where(use, t_abs * coef, 1.0), jnp.inf))
+    return alpha, beta
+
+
+def forward_pieces_bands(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tuple[list, list]:
+    """:func:`forward_pieces` of rows without a box: one piece per band (its upper row) and the row
+    ``x_b ≤ cap_b``, the same step."""
+    a_list, b_list = [], []
+    for i, (active, _, _, a_lim, k) in enumerate(_bands(gu, gx, h)):
+        t = _band_t(gu, i)
+        inv = jnp.where(active, 2.0 * delta / jnp.where(active, jnp.abs(t), 1.0), 0.0)
+        a_list.append(jnp.where(active, 1.0 - jnp.where(t > 0, k, -k) * inv, 0.0))
+        b_list.append(jnp.where(active, a_lim * inv, jnp.inf))
+    a_cap, b_cap = forward_pieces(gu[-2:-1], gx[-2:-1], h[-2:-1], delta)
+    return a_list + a_cap, b_list + b_cap
+
+
+def _band_t(gu: list, band: int) -> jnp.ndarray:
+    """``T`` of band ``band`` (axis ``band // 2``, end ``band % 2``): its row with the sign as built."""
+    return gu[4 * (band // 2) + band % 2]
 
 
 def backward_scan(
@@ -279,6 +361,7 @@ def solve_window(
     x_end: jnp.ndarray,
     curved: bool,
     x_start: jnp.ndarray | float = 0.0,
+    bands: bool = False,
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
     """:func:`solve` from ``x_start`` at the first node, and which nodes do not depend on ``x_end``.
 
@@ -287,18 +370,20 @@ def solve_window(
     any larger ``x_end`` (the step ``K_j = F_j(K_{j+1})`` is non-decreasing in ``K_{j+1}``, and here
     ``F_j(K_{j+1}) = F_j(∞)``), so ``x`` at every node up to the last such ``j`` is that of the whole
     program, whatever follows the window; ``k0``: the controllable set's end at the first node (below
-    ``x_start`` where the window is too short to stop from there).
+    ``x_start`` where the window is too short to stop from there). ``bands`` (static): no interval has a
+    box, so the band forms (:func:`static_cap_bands`, ...) give the same values with a quarter of the work.
     """
     gu, gx, h = rows
     cap_b = h[-2]
     if curved:
-        x_static = static_cap(gu, gx, h, cap_a)
-        alpha, beta = backward_pieces(gu, gx, h, delta)
+        cap_fn, back_fn, fwd_fn = _forms(bands)
+        x_static = cap_fn(gu, gx, h, cap_a)
+        alpha, beta = back_fn(gu, gx, h, delta)
         k = backward_scan(x_static, alpha, beta, x_end, cap_b)
         unbounded = x_static  # F_j(∞): each term with K_{j+1} replaced by its own end cap
         for a, b in zip(alpha, beta, strict=True):
             unbounded = jnp.minimum(unbounded, jnp.where(a > 0, a * cap_b + b, b))
-        x = forward_scan(*forward_pieces(gu, gx, h, delta), delta, k, x_start)
+        x = forward_scan(*fwd_fn(gu, gx, h, delta), delta, k, x_start)
         return x, k[:-1] >= unbounded, k[0]
     # Lines only (gx = 0 on the axis rows): the node caps and min(B, x + D) in both directions.
     node_cap = jnp.concatenate([cap_a, x_end[None]])
@@ -310,12 +395,20 @@ def solve_window(
     return x, back[:-1] >= node_cap[:-1], back[0]
 
 
+def _forms(bands: bool) -> tuple[Callable, Callable, Callable]:
+    """The static cap and the pieces: the band forms where no interval has a box, else the row-pair forms."""
+    if bands:
+        return static_cap_bands, backward_pieces_bands, forward_pieces_bands
+    return static_cap, backward_pieces, forward_pieces
+
+
 def solve_chunked(
     chunk_rows: Callable[[jnp.ndarray], dict],
     n_chunks: int,
     x_end: jnp.ndarray,
     x_start: jnp.ndarray | float = 0.0,
     tail: Callable[[dict, jnp.ndarray], dict] | None = None,
+    bands: bool = False,
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray, dict]:
     """:func:`solve_window` (curved) over ``n_chunks`` chunks of ``C`` intervals, rows built chunk by chunk.
 
@@ -326,15 +419,16 @@ def solve_chunked(
     ``i`` (a traced index), each ``(C,)``; it is called once per pass, so it should be cheap elementwise
     work. ``tail(chunk, nodes)``: per-chunk outputs ``(C,)`` from the chunk's dict and its ``C + 1``
     node values of ``x``, gathered into ``(n_chunks · C,)`` vectors. Returns ``(x, exact, k0, tail_out)``
-    as :func:`solve_window` does, ``tail_out`` ``{}`` without ``tail``.
+    as :func:`solve_window` does, ``tail_out`` ``{}`` without ``tail``. ``bands``: as :func:`solve_window`'s.
     """
+    cap_fn, back_fn, fwd_fn = _forms(bands)
 
     def back(k_next, i):
         c = chunk_rows(i)
         gu, gx, h = c["rows"]
         cap_b = h[-2]
-        x_static = static_cap(gu, gx, h, c["cap_a"])
-        alpha, beta = backward_pieces(gu, gx, h, c["delta"])
+        x_static = cap_fn(gu, gx, h, c["cap_a"])
+        alpha, beta = back_fn(gu, gx, h, c["delta"])
         k_first, (k, exact) = jax.lax.scan(_backward_step_exact, k_next, (x_static, alpha, beta, cap_b), reverse=True)
         return k_first, (k, exact)
 
@@ -347,7 +441,7 @@ def solve_chunked(
         i, k_b = i_k
         c = chunk_rows(i)
         gu, gx, h = c["rows"]
-        a, b = forward_pieces(gu, gx, h, c["delta"])
+        a, b = fwd_fn(gu, gx, h, c["delta"])
         x_last, x = jax.lax.scan(_forward_step, x_a, (a, b, c["delta"], k_b))
         out = {} if tail is None else tail(c, jnp.concatenate([x_a[None], x]))
         return x_last, (x, out)

@@ -108,7 +108,7 @@ _AXIS_FIELDS = ("t_a", "k_a", "t_b", "k_b", "t_lo", "t_hi", "k_lo", "k_hi")
 CHUNK_INTERVALS = 2048
 
 
-@partial(jax.jit, static_argnames=("curved_any", "axes"))
+@partial(jax.jit, static_argnames=("curved_any", "axes", "boxed_any"))
 def plan_grid(
     g: dict,
     v_max,
@@ -119,6 +119,7 @@ def plan_grid(
     curved_any: bool,
     axes: tuple[int, ...] = (0, 1, 2),
     j_max=None,
+    boxed_any: bool = True,
 ):
     """The planner as one array program over ``m`` (padded) intervals; see the module docstring.
 
@@ -132,7 +133,8 @@ def plan_grid(
     program on a three-axis machine has two thirds of the rows). Returns the segments' trapezoids,
     ``x_node``, ``share`` (each interval's share of the axes' acceleration, see :func:`interval_share`) and
     :func:`~.phaseplane.solve_window`'s ``exact`` and ``k0``. With curved intervals the window is solved
-    chunk by chunk (:func:`~.phaseplane.solve_chunked`, the same plan).
+    chunk by chunk (:func:`~.phaseplane.solve_chunked`, the same plan). ``boxed_any`` (static): some
+    interval has a box; without one the passes use the band forms (the same plan, a quarter of the row work).
     """
     limits = (v_max, a_max, chord_tol, tick_hz, axes, j_max)
     share = interval_share(g["at_kink"], g["curved"])
@@ -146,7 +148,7 @@ def plan_grid(
                 {k: jax.lax.dynamic_slice_in_dim(v, i * size, size, v.ndim - 1) for k, v in g.items()}, *limits
             )
 
-        x_node, exact, k0, out = solve_chunked(chunk_rows, m // size, zero, x_start, _segment_laws)
+        x_node, exact, k0, out = solve_chunked(chunk_rows, m // size, zero, x_start, _segment_laws, bands=not boxed_any)
     else:
         c = _interval_rows(g, *limits)
         x_node, exact, k0 = solve_window(c["rows"], c["delta"], c["cap_a"], zero, False, x_start)
@@ -468,6 +470,7 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
         machine.tick_hz,
         x_start,
         curved_any=bool(grid.curved.any()),
+        boxed_any=bool(grid.boxed.any()),
         axes=facts.axes,
         j_max=np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
     )
