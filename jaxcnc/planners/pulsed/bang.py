@@ -74,10 +74,13 @@ def candidates(lo: np.ndarray, window: PulseWindow) -> np.ndarray:
     top = cols[-1][:, -1]
     for r in range(1, GEOMETRIC + 1):
         cols.append(snap_up_ticks(np.ceil(top * 1.3**r).astype(np.int64), n_min, n_max, idle)[0][:, None])
-    return np.sort(np.concatenate(cols, axis=1), axis=1)
+    out = np.concatenate(cols, axis=1)
+    tangled = np.flatnonzero(np.any(np.diff(out, axis=1) < 0, axis=1))  # long jumps: period ranges overlap
+    out[tangled] = np.sort(out[tangled], axis=1)
+    return out
 
 
-def _rows(D, h, A, cap_mid, cap_knot, cruise):
+def _rows(D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     """The gap's linear conditions ``l <= α v0 + β v1 <= u``: four rows, last axis ``(..., 4)``.
 
     Two phases (``cruise`` false; halves at ``a1``, ``a2``): ``a1 h = 4m − 3v0 − v1``, ``a2 h = −4m + v0 + 3v1``,
@@ -88,106 +91,152 @@ def _rows(D, h, A, cap_mid, cap_knot, cruise):
     """
     m = D / h
     Ah = A * h
-    one = jnp.ones_like(m)
-    p = jnp.where(cruise, 7.0, 3.0) * one
-    alpha = jnp.stack([p, one, one, 0.0 * one], axis=-1)
-    beta = jnp.stack([one, p, one, one], axis=-1)
-    c = jnp.where(cruise, 8.0 * m, 4.0 * m)
-    acc = jnp.where(cruise, 1.5 * Ah, Ah)
-    vel = jnp.where(cruise, 6.0 * cap_mid, 2.0 * cap_mid)
-    lo = jnp.stack([c - acc, c - acc, c - vel, -cap_knot * one], axis=-1)
-    hi = jnp.stack([c + acc, c + acc, c + vel, cap_knot * one], axis=-1)
+    one = xp.ones_like(m)
+    p = xp.where(cruise, 7.0, 3.0) * one
+    alpha = xp.stack([p, one, one, 0.0 * one], axis=-1)
+    beta = xp.stack([one, p, one, one], axis=-1)
+    c = xp.where(cruise, 8.0 * m, 4.0 * m)
+    acc = xp.where(cruise, 1.5 * Ah, Ah)
+    vel = xp.where(cruise, 6.0 * cap_mid, 2.0 * cap_mid)
+    lo = xp.stack([c - acc, c - acc, c - vel, -cap_knot * one], axis=-1)
+    hi = xp.stack([c + acc, c + acc, c + vel, cap_knot * one], axis=-1)
     return alpha, beta, lo, hi
 
 
-def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise):
+def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     """Speeds ``v1`` reachable from ``v0 ∈ [lo0, hi0]`` over a gap: ``(ok, L, U)``, broadcast.
 
-    Upper limits on ``v1`` are ``(u_i − α_i v0)/β_i`` and lower ones ``(l_j − α_j v0)/β_j``, all
-    non-increasing in ``v0``; ``v0`` is feasible where every upper one is above every lower one (a linear
-    condition per pair). Over the feasible ``v0`` interval ``[a, b]`` the largest ``v1`` is at ``a``, the
-    smallest at ``b``.
+    The rows of :func:`_rows` are ``c − e <= p x + y <= c + e``, ``c − e <= x + p y <= c + e``,
+    ``c − w <= x + y <= c + w``, ``|y| <= K`` (``x = v0``, ``y = v1``; ``p = 3``, ``c = 4m``, ``e = A h``,
+    ``w = 2 cap_mid``, or cruising ``p = 7``, ``c = 8m``, ``e = 1.5 A h``, ``w = 6 cap_mid``; ``K =
+    cap_knot``). Upper limits on ``y`` are ``u_i(x)`` and lower ones ``l_j(x)``, all non-increasing in
+    ``x``; ``x`` is feasible where every ``u_i(x) >= l_j(x)``: twelve linear conditions, six bounding ``x``
+    below and six above (written out below, closed form, no pairwise tensor). Over the feasible ``[a, b]``
+    the largest ``y`` is ``min_i u_i(a)``, the smallest ``max_j l_j(b)``. ``xp``: ``jax.numpy`` (in the
+    scans) or ``numpy``.
     """
-    alpha, beta, l, u = _rows(D, h, A, cap_mid, cap_knot, cruise)
-    s = alpha / beta
-    # pair (i upper, j lower): v0 (s_j - s_i) >= l_j/β_j - u_i/β_i
-    c = s[..., None, :] - s[..., :, None]  # (..., i, j)
-    r = l[..., None, :] / beta[..., None, :] - u[..., :, None] / beta[..., :, None]
-    safe = jnp.where(c != 0, c, 1.0)
-    lower_v0 = jnp.where(c > 0, r / safe, -jnp.inf)
-    upper_v0 = jnp.where(c < 0, r / safe, jnp.inf)
-    same_ok = jnp.all(jnp.where(c == 0, r <= 1e-12 * (1 + jnp.abs(r)), True), axis=(-2, -1))
-    a = jnp.maximum(lo0, jnp.max(lower_v0, axis=(-2, -1)))
-    b = jnp.minimum(hi0, jnp.min(upper_v0, axis=(-2, -1)))
-    ok = same_ok & (a <= b + 1e-12 * (1 + jnp.abs(b)))
-    b = jnp.maximum(a, b)
-    U = jnp.min((u - alpha * a[..., None]) / beta, axis=-1)
-    L = jnp.max((l - alpha * b[..., None]) / beta, axis=-1)
-    return ok & (L <= U + 1e-12 * (1 + jnp.abs(U))), L, jnp.maximum(L, U)
+    m = D / h
+    p = xp.where(cruise, 7.0, 3.0)
+    c = xp.where(cruise, 8.0, 4.0) * m
+    e = xp.where(cruise, 1.5, 1.0) * A * h
+    w = xp.where(cruise, 6.0, 2.0) * cap_mid
+    K = cap_knot
+    hi_, lo_ = c + e, c - e
+    q = p * p - 1.0
+    lower = [
+        (p * lo_ - hi_) / q,
+        (p * (c - w) - hi_) / (p - 1.0),
+        -(e + w) / (p - 1.0),
+        (lo_ - K) / p,
+        lo_ - p * K,
+        c - w - K,
+    ]
+    upper = [
+        (p * hi_ - lo_) / q,
+        (e + w) / (p - 1.0),
+        (hi_ + K) / p,
+        hi_ + p * K,
+        (p * (c + w) - lo_) / (p - 1.0),
+        c + w + K,
+    ]
+    a, b = lo0, hi0
+    for x in lower:
+        a = xp.maximum(a, x)
+    for x in upper:
+        b = xp.minimum(b, x)
+    ok = a <= b + 1e-12 * (1 + xp.abs(b))
+    b = xp.maximum(a, b)
+    U = xp.minimum(xp.minimum(hi_ - p * a, (hi_ - a) / p), xp.minimum(c + w - a, K))
+    L = xp.maximum(xp.maximum(lo_ - p * b, (lo_ - b) / p), xp.maximum(c - w - b, -K))
+    return ok & (L <= U + 1e-12 * (1 + xp.abs(U))), L, xp.maximum(L, U)
 
 
 #: Gaps ahead the first pass checks a duration against: the next gaps at their shortest candidates must fit.
-LOOKAHEAD = 2
+LOOKAHEAD = 4
 #: Passes after the first: each scans the other way and keeps every gap at most as long as before.
 PASSES = 1
-#: Scan steps unrolled together (fewer loop round trips on a CPU).
-UNROLL = 1
+#: Candidates of a sweep against a plan: the shortest ones (up to the plan's) and the plan's own duration.
+PREV_CANDIDATES = 8
+#: The first sweep's candidates, columns of :func:`candidates`: the first period range finely, then spread out.
+FIRST_COLUMNS = np.array([0, 1, 2, 4, 7, 12, 13, 16, 19, 25, 30, 40, 50, 60, 66, 70])
 #: Tolerance on interval overlaps (mm/s).
 EPS_MM_S = 1e-9
 
 
-@partial(jax.jit, static_argnames=("lookahead",))
-def forward(D, cand, cruise, capm, capk, blo, bhi, A, tick_hz, lookahead=0):
+@jax.jit
+def forward(D, cand, cruise, capm, capk, blo, bhi, slo, shi, A, tick_hz):
     """Forward scan over gaps: ``D`` ``(g, 3)``, ``cand`` ``(g, C)`` ticks, ``cruise`` ``(g,)``.
 
     ``capm`` ``(g, 3)`` caps each gap's mid speed, ``capk`` ``(g+1, 3)`` each knot's speed; ``blo``, ``bhi``
-    ``(g+1, 3)``: the speeds at each knot from which the rest can still be completed (the last knot: rest).
-    Each gap takes its shortest candidate whose reachable exit speeds meet that set on every axis (and,
-    with ``lookahead``, after which that many more gaps still fit at their shortest candidates); else its
-    shortest candidate that fits itself; else its longest. Returns ``(ticks (g,), lo (g+1, 3), hi (g+1, 3),
-    ok (g,))``: the chosen tick counts, the reachable (and completable) speed interval at every knot (knot
-    0 at rest), and whether a candidate met the set.
+    ``(g+1, 3)``: the speeds at each knot from which the rest can still be completed (the last knot: rest);
+    ``slo``, ``shi`` ``(g+1, K, 3)``: those from which the next ``1..K`` gaps can be passed at their shortest
+    candidates (the look-ahead, :func:`ahead_sets`). ``cand`` is a few candidates per gap (ascending; all
+    are tried). Each gap takes its shortest candidate whose reachable
+    exit speeds, within ``[blo, bhi]``, meet the sets on every axis for the most look-ahead depths (``1..k``
+    all met, ``k`` as large as any candidate reaches); else its shortest candidate that fits itself; else its
+    longest. Returns ``(ticks (g,), lo (g+1, 3), hi (g+1, 3), ok (g,))``: the chosen tick counts,
+    the reachable (and completable) speed interval at every knot (knot 0 at rest), and whether a candidate
+    met the sets.
     """
-    g = D.shape[0]
-    if lookahead:
-        ahead = [
-            jnp.stack([jnp.roll(x, -k, axis=0) for k in range(1, lookahead + 1)], axis=1)
-            for x in (D, cruise, capm, capk[1:], cand[:, 0])
-        ]
-        real = jnp.stack([jnp.arange(g) + k < g for k in range(1, lookahead + 1)], axis=1)
-    else:
-        ahead = [jnp.zeros((g, 0, 3)), jnp.zeros((g, 0), bool), jnp.zeros((g, 0, 3)), jnp.zeros((g, 0, 3))]
-        ahead += [jnp.zeros((g, 0), cand.dtype)]
-        real = jnp.zeros((g, 0), bool)
+
+    depth = slo.shape[1]
 
     def choose(lo0, hi0, x, c):
-        """The first good candidate among ``c`` ``(C,)``: ``(found, tick, L, U, fit)``."""
-        d, _, cr, cm, ck, bl, bh, ad, ac, am, ak, ah, areal = x
+        """The best candidate among ``c`` ``(C,)``: ``(level, tick, L, U)``."""
+        d, _, cr, cm, ck, bl, bh, sl, sh = x
         h = c.astype(jnp.float64)[:, None] / tick_hz  # (C, 1)
         ok, L, U = project(lo0[None], hi0[None], d[None], h, A[None], cm[None], ck[None], cr)  # (C, 3)
         L, U = jnp.maximum(L, bl[None]), jnp.minimum(U, bh[None])
-        good = jnp.all(ok & (L <= U + EPS_MM_S), axis=1)
         fit = jnp.all(ok, axis=1)
-        lk, uk = L, U
-        for k in range(lookahead):
-            hk = ah[k].astype(jnp.float64) / tick_hz
-            okk, lk, uk = project(lk, uk, ad[k][None], hk, A[None], am[k][None], ak[k][None], ac[k])
-            good = good & (~areal[k] | jnp.all(okk, axis=1))
-        k = jnp.where(jnp.any(good), jnp.argmax(good), jnp.where(jnp.any(fit), jnp.argmax(fit), c.shape[0] - 1))
-        return good[k], c[k], L[k], jnp.maximum(L[k], U[k])
+        meets = [fit & jnp.all(L <= U + EPS_MM_S, axis=1)]
+        for k in range(depth):
+            meet = jnp.maximum(L, sl[k][None]) <= jnp.minimum(U, sh[k][None]) + EPS_MM_S
+            meets.append(meets[-1] & jnp.all(meet, axis=1))
+        level = fit.astype(jnp.int32) + sum(m.astype(jnp.int32) for m in meets)
+        k = jnp.where(jnp.max(level) > 0, jnp.argmax(level), c.shape[0] - 1)
+        return level[k].astype(jnp.int32), c[k], L[k], jnp.maximum(L[k], U[k])
 
     def step(state, x):
         lo0, hi0 = state
-        c = x[1]
-        # most gaps take their shortest candidate: try it alone, search the others only where it fails
-        first = choose(lo0, hi0, x, c[:1])
-        good, tick, L, U = jax.lax.cond(first[0], lambda: first, lambda: choose(lo0, hi0, x, c))
-        return (L, U), (tick, L, U, good)
+        # every candidate at once, no branch: a taken ``lax.cond`` branch costs ~0.1 ms on a CPU, so a search
+        # only where the shortest fails was slower than a few well-spread candidates for every gap
+        level, tick, L, U = choose(lo0, hi0, x, x[1])
+        return (L, U), (tick, L, U, level >= 2)
 
     z = jnp.zeros(D.shape[1])
-    xs = (D, cand, cruise, capm, capk[1:], blo[1:], bhi[1:], *ahead, real)
-    _, (ticks, L, U, ok) = jax.lax.scan(step, (z, z), xs, unroll=UNROLL)
+    xs = (D, cand, cruise, capm, capk[1:], blo[1:], bhi[1:], slo[1:], shi[1:])
+    _, (ticks, L, U, ok) = jax.lax.scan(step, (z, z), xs)
     return ticks, jnp.concatenate([z[None], L]), jnp.concatenate([z[None], U]), ok
+
+
+#: An empty speed interval is ``[EMPTY_MM_S, -EMPTY_MM_S]`` (finite: no ``0 · inf`` in the rows).
+EMPTY_MM_S = 1e30
+
+
+@partial(jax.jit, static_argnames=("depth",))
+def ahead_sets(D, ticks, cruise, capm, capk, blo, bhi, A, tick_hz, depth):
+    """Speeds at each knot ``(g+1, depth, 3)`` (lo, hi) from which the next ``1..depth`` gaps pass in ``ticks``.
+
+    Knot ``i``'s set is the backward projection of knot ``i+1``'s through gap ``i`` (time reversed: the
+    forward :func:`project` of the negated speeds over ``−D``), within ``[blo, bhi]`` and the knot's cap;
+    ``depth`` rounds, each vectorised over all knots at once (no scan). An empty set is
+    ``[EMPTY_MM_S, −EMPTY_MM_S]``. Whether a gap's exit interval meets the set is whether the next ``depth``
+    gaps can follow at those durations: the forward sweep's look-ahead without stepping through them.
+    """
+    h = (ticks.astype(jnp.float64) / tick_hz)[:, None]
+    lo0, hi0 = jnp.maximum(blo, -capk), jnp.minimum(bhi, capk)
+
+    def back(carry, _):
+        lo, hi = carry
+        ok, L, U = project(-hi[1:], -lo[1:], -D, h, A, capm, capk[:-1], cruise[:, None])
+        nlo, nhi = jnp.maximum(-U, lo0[:-1]), jnp.minimum(-L, hi0[:-1])
+        empty = ~ok | (nlo > nhi + EPS_MM_S)
+        nlo, nhi = jnp.where(empty, EMPTY_MM_S, nlo), jnp.where(empty, -EMPTY_MM_S, nhi)
+        out = jnp.concatenate([nlo, lo0[-1:]]), jnp.concatenate([nhi, hi0[-1:]])
+        return out, out
+
+    _, (los, his) = jax.lax.scan(back, (lo0, hi0), None, length=depth)
+    return jnp.moveaxis(los, 0, 1), jnp.moveaxis(his, 0, 1)
 
 
 @jax.jit
@@ -291,21 +340,30 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
 
     The speeds from which the rest can be completed are those reachable, the other way, from the far
     end's rest with ``prev``'s durations: the sweep never boxes itself in, and ``prev`` is always a choice.
+    Without ``prev``, each gap looks ``lookahead`` gaps ahead (:func:`ahead_sets`).
     """
     g, size = gaps.g, gaps.size
     if prev is None:
         blo = np.full((g + 1, 3), -np.inf)
         bhi = np.full((g + 1, 3), np.inf)
         blo[-1] = bhi[-1] = 0.0
-        col = cand[:, :1]
+        c = cand[:, FIRST_COLUMNS[FIRST_COLUMNS < cand.shape[1]]]
     else:
         lo, hi, _ = other.reachable(prev, A, f)  # in the other direction: negate and reverse
         blo, bhi = -hi[::-1], -lo[::-1]
-        col = prev[:, None]
-    c = np.sort(np.concatenate([cand, col], axis=1), axis=1)
+        # prev is always good (every speed in the state is completable with it): the shortest candidate, the
+        # few just below prev, prev
+        below = np.sum(cand < prev[:, None], axis=1)
+        idx = np.clip(below[:, None] - np.arange(PREV_CANDIDATES - 2, 0, -1)[None], 0, None)
+        near = np.minimum(np.take_along_axis(cand, idx, axis=1), prev[:, None])
+        c = np.concatenate([np.minimum(cand[:, :1], prev[:, None]), near, prev[:, None]], axis=1)
     c = gaps.orient(c, n_min)
     knots = (_pad(blo, size + 1, 0.0), _pad(bhi, size + 1, 0.0))
-    ticks, _, _, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, lookahead=lookahead)
+    if prev is None:
+        ahead = ahead_sets(gaps.D, c[:, 0], gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, max(lookahead, 1))
+    else:
+        ahead = tuple(k[:, None] for k in knots)
+    ticks, _, _, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, *ahead, A, f)
     ticks = np.asarray(ticks, np.int64)[:g]
     return (ticks[::-1] if gaps.reverse else ticks), bool(np.all(np.asarray(ok)[:g]))
 
