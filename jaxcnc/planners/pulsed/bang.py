@@ -46,38 +46,58 @@ from jaxcnc.planners.pulsed.stop_and_go import rest_to_rest
 from jaxcnc.planners.pulsed.trajectory import Trajectory, move_pieces, rest_pieces
 from jaxcnc.planners.pulsed.windows import PulseWindow, snap_up_ticks
 
-#: Candidate tick counts per gap: fine steps over the first two period ranges, coarse over the next ones,
-#: then a few geometric ones for long jumps.
-FINE_STEP_TICKS = 2
-COARSE_RANGES = 8
-COARSE_PER_RANGE = 5
-GEOMETRIC = 8
+#: The first sweep's candidates per gap, in ticks per period of the shortest range (``m0`` periods, from the
+#: shortest admissible count), then fractions of the next range, the ends of four more, and geometric steps.
+FIRST_STEPS = (0, 2, 4, 8, 14, 24)
+NEXT_FRACTIONS = (0.0, 0.25, 0.5, 1.0)
+LATER_RANGES = (2, 4, 6, 8)
+GEOMETRIC = (1, 5)
 
 
 def candidates(lo: np.ndarray, window: PulseWindow) -> np.ndarray:
-    """Admissible tick counts ``(g, C)`` at or above ``lo`` ``(g,)``, ascending per row."""
+    """The first sweep's admissible tick counts ``(g, C)`` at or above ``lo`` ``(g,)``, ascending per row."""
     n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
     first, m0 = snap_up_ticks(np.asarray(lo, np.int64), n_min, n_max, idle)
-    cols = []
-    if not idle:
-        steps = np.arange(0, n_max - n_min + FINE_STEP_TICKS, FINE_STEP_TICKS)
+    if not idle:  # one period: every other tick of the window
+        steps = np.arange(0, n_max - n_min + 2, 2)
         return np.minimum(first[:, None] + steps[None], np.maximum(n_max, first[:, None]))
-    for r in range(2):  # the first two period ranges, every FINE_STEP_TICKS * m ticks
-        m = m0 + r
-        start = np.maximum(first, m * n_min) if r == 0 else m * n_min
-        k = np.arange(0, (n_max - n_min) // FINE_STEP_TICKS + 1)
-        cols.append(np.minimum(start[:, None] + FINE_STEP_TICKS * m[:, None] * k[None], (m * n_max)[:, None]))
-    for r in range(2, 2 + COARSE_RANGES):
-        m = (m0 + r)[:, None]
-        frac = np.linspace(0.0, 1.0, COARSE_PER_RANGE)[None]
-        cols.append(np.round(m * n_min + frac * m * (n_max - n_min)).astype(np.int64))
-    top = cols[-1][:, -1]
-    for r in range(1, GEOMETRIC + 1):
+    m0 = m0[:, None]
+    cols = [np.minimum(first[:, None] + np.array(FIRST_STEPS)[None] * m0, m0 * n_max)]
+    m = m0 + 1
+    cols.append(np.round(m * n_min + np.array(NEXT_FRACTIONS)[None] * m * (n_max - n_min)).astype(np.int64))
+    cols.append((m0 + np.array(LATER_RANGES)[None]) * n_max)
+    top = (m0[:, 0] + LATER_RANGES[-1] + 1) * n_max
+    for r in GEOMETRIC:
         cols.append(snap_up_ticks(np.ceil(top * 1.3**r).astype(np.int64), n_min, n_max, idle)[0][:, None])
     out = np.concatenate(cols, axis=1)
     tangled = np.flatnonzero(np.any(np.diff(out, axis=1) < 0, axis=1))  # long jumps: period ranges overlap
     out[tangled] = np.sort(out[tangled], axis=1)
     return out
+
+
+#: Candidates of a sweep against a plan (:func:`near_candidates`): steps below the plan's count, in ticks per
+#: period, within the first two period ranges and beyond.
+FINE_STEP, COARSE_STEP = 2, 6
+PREV_STEPS = (5, 4, 3, 2, 1)
+
+
+def near_candidates(first: np.ndarray, prev: np.ndarray, window: PulseWindow) -> np.ndarray:
+    """Admissible tick counts ``(g, 8)`` from ``first`` (the shortest) up to ``prev``, ascending per row.
+
+    The plan's own count ``prev`` (``m`` periods), a few below it in its range (``prev − k s m`` for ``k`` in
+    :data:`PREV_STEPS`, ``s`` = :data:`FINE_STEP` in the first two ranges above ``first``, else
+    :data:`COARSE_STEP`; at least ``m n_min``), the longest count with one period fewer ``(m − 1) n_max``, and
+    ``first``; each at least ``first``.
+    """
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m0 = snap_up_ticks(first, n_min, n_max, idle)[1]
+    m = snap_up_ticks(prev, n_min, n_max, idle)[1]
+    step = np.where(m <= m0 + 1, FINE_STEP, COARSE_STEP) * m
+    floor = np.maximum(first, m * n_min)
+    cols = [first, np.maximum(first, np.where(m > 1, (m - 1) * n_max, first))]
+    cols += [np.maximum(floor, prev - k * step) for k in PREV_STEPS]
+    cols.append(prev)
+    return np.sort(np.minimum(np.stack(cols, axis=1), prev[:, None]), axis=1)
 
 
 def _rows(D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
@@ -155,15 +175,15 @@ def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
 LOOKAHEAD = 4
 #: Passes after the first: each scans the other way and keeps every gap at most as long as before.
 PASSES = 1
-#: Candidates of a sweep against a plan: the shortest ones (up to the plan's) and the plan's own duration.
-PREV_CANDIDATES = 8
-#: The first sweep's candidates, columns of :func:`candidates`: the first period range finely, then spread out.
-FIRST_COLUMNS = np.array([0, 1, 2, 4, 7, 12, 13, 16, 19, 25, 30, 40, 50, 60, 66, 70])
 #: Tolerance on interval overlaps (mm/s).
 EPS_MM_S = 1e-9
 
 
-@jax.jit
+#: XLA options for the sweeps: LLVM's optimisation level 1 compiles in ~3/4 of the time, runs as fast.
+COMPILER_OPTIONS = {"xla_backend_optimization_level": 1}
+
+
+@partial(jax.jit, compiler_options=COMPILER_OPTIONS)
 def forward(D, cand, cruise, capm, capk, blo, bhi, slo, shi, A, tick_hz):
     """Forward scan over gaps: ``D`` ``(g, 3)``, ``cand`` ``(g, C)`` ticks, ``cruise`` ``(g,)``.
 
@@ -213,33 +233,31 @@ def forward(D, cand, cruise, capm, capk, blo, bhi, slo, shi, A, tick_hz):
 EMPTY_MM_S = 1e30
 
 
-@partial(jax.jit, static_argnames=("depth",))
 def ahead_sets(D, ticks, cruise, capm, capk, blo, bhi, A, tick_hz, depth):
     """Speeds at each knot ``(g+1, depth, 3)`` (lo, hi) from which the next ``1..depth`` gaps pass in ``ticks``.
 
     Knot ``i``'s set is the backward projection of knot ``i+1``'s through gap ``i`` (time reversed: the
     forward :func:`project` of the negated speeds over ``−D``), within ``[blo, bhi]`` and the knot's cap;
-    ``depth`` rounds, each vectorised over all knots at once (no scan). An empty set is
-    ``[EMPTY_MM_S, −EMPTY_MM_S]``. Whether a gap's exit interval meets the set is whether the next ``depth``
-    gaps can follow at those durations: the forward sweep's look-ahead without stepping through them.
+    ``depth`` rounds, each vectorised over all knots at once (NumPy: no scan, nothing to compile). An empty
+    set is ``[EMPTY_MM_S, −EMPTY_MM_S]``. Whether a gap's exit interval meets the set is whether the next
+    ``depth`` gaps can follow at those durations: the forward sweep's look-ahead without stepping through them.
     """
-    h = (ticks.astype(jnp.float64) / tick_hz)[:, None]
-    lo0, hi0 = jnp.maximum(blo, -capk), jnp.minimum(bhi, capk)
-
-    def back(carry, _):
-        lo, hi = carry
-        ok, L, U = project(-hi[1:], -lo[1:], -D, h, A, capm, capk[:-1], cruise[:, None])
-        nlo, nhi = jnp.maximum(-U, lo0[:-1]), jnp.minimum(-L, hi0[:-1])
+    h = (np.asarray(ticks, np.float64) / tick_hz)[:, None]
+    lo0, hi0 = np.maximum(blo, -capk), np.minimum(bhi, capk)
+    lo, hi = lo0, hi0
+    los, his = [], []
+    for _ in range(depth):
+        ok, L, U = project(-hi[1:], -lo[1:], -D, h, A, capm, capk[:-1], cruise[:, None], xp=np)
+        nlo, nhi = np.maximum(-U, lo0[:-1]), np.minimum(-L, hi0[:-1])
         empty = ~ok | (nlo > nhi + EPS_MM_S)
-        nlo, nhi = jnp.where(empty, EMPTY_MM_S, nlo), jnp.where(empty, -EMPTY_MM_S, nhi)
-        out = jnp.concatenate([nlo, lo0[-1:]]), jnp.concatenate([nhi, hi0[-1:]])
-        return out, out
+        nlo, nhi = np.where(empty, EMPTY_MM_S, nlo), np.where(empty, -EMPTY_MM_S, nhi)
+        lo, hi = np.concatenate([nlo, lo0[-1:]]), np.concatenate([nhi, hi0[-1:]])
+        los.append(lo)
+        his.append(hi)
+    return np.stack(los, axis=1), np.stack(his, axis=1)
 
-    _, (los, his) = jax.lax.scan(back, (lo0, hi0), None, length=depth)
-    return jnp.moveaxis(los, 0, 1), jnp.moveaxis(his, 0, 1)
 
-
-@jax.jit
+@partial(jax.jit, compiler_options=COMPILER_OPTIONS)
 def reachable(D, ticks, cruise, capm, capk, A, tick_hz):
     """Speeds reachable from rest at every knot ``(g+1, 3)`` (lo, hi) with the tick counts fixed; and ``ok``."""
 
@@ -254,7 +272,7 @@ def reachable(D, ticks, cruise, capm, capk, A, tick_hz):
     return jnp.concatenate([z[None], L]), jnp.concatenate([z[None], U]), ok
 
 
-@jax.jit
+@partial(jax.jit, compiler_options=COMPILER_OPTIONS)
 def backward(D, ticks, cruise, capm, capk, lo, hi, A, tick_hz):
     """Backward scan: each knot's speed ``(g+1, 3)`` inside its interval and fitting the gap after it."""
     h = ticks.astype(jnp.float64)[:, None] / tick_hz
@@ -335,7 +353,7 @@ class _Gaps:
         return np.array(lo)[: g + 1], np.array(hi)[: g + 1], bool(np.all(np.asarray(ok)[:g]))
 
 
-def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
+def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, window: PulseWindow, lookahead=0):
     """One greedy sweep in ``gaps``' direction; with ``prev`` ticks, every gap at most as long as in ``prev``.
 
     The speeds from which the rest can be completed are those reachable, the other way, from the far
@@ -347,17 +365,13 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
         blo = np.full((g + 1, 3), -np.inf)
         bhi = np.full((g + 1, 3), np.inf)
         blo[-1] = bhi[-1] = 0.0
-        c = cand[:, FIRST_COLUMNS[FIRST_COLUMNS < cand.shape[1]]]
+        c = cand
     else:
         lo, hi, _ = other.reachable(prev, A, f)  # in the other direction: negate and reverse
         blo, bhi = -hi[::-1], -lo[::-1]
-        # prev is always good (every speed in the state is completable with it): the shortest candidate, the
-        # few just below prev, prev
-        below = np.sum(cand < prev[:, None], axis=1)
-        idx = np.clip(below[:, None] - np.arange(PREV_CANDIDATES - 2, 0, -1)[None], 0, None)
-        near = np.minimum(np.take_along_axis(cand, idx, axis=1), prev[:, None])
-        c = np.concatenate([np.minimum(cand[:, :1], prev[:, None]), near, prev[:, None]], axis=1)
-    c = gaps.orient(c, n_min)
+        # prev is always good (every speed in the state is completable with it): the shortest few up to it
+        c = near_candidates(cand[:, 0], prev, window)
+    c = gaps.orient(c, window.n_min)
     knots = (_pad(blo, size + 1, 0.0), _pad(bhi, size + 1, 0.0))
     if prev is None:
         ahead = ahead_sets(gaps.D, c[:, 0], gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, max(lookahead, 1))
@@ -368,8 +382,9 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, n_min, lookahead=0):
     return (ticks[::-1] if gaps.reverse else ticks), bool(np.all(np.asarray(ok)[:g]))
 
 
-def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, n_min, passes):
-    """``passes`` sweeps against ``tried[-1]``, alternating direction (the first in ``other``'s direction).
+def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, window: PulseWindow, passes):
+    """``passes`` sweeps against ``tried[-1]``, alternating direction (the first in ``other``'s direction),
+    until one gains less than :data:`MIN_GAIN`.
 
     Returns ``(ticks, lo, hi, tried)`` for the shortest durations whose speeds check out (reachable from
     rest, the last knot at rest), or ``None`` when none do.
@@ -377,11 +392,14 @@ def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, n_min, passes):
     ticks = tried[-1]
     for p in range(passes):
         one, two = (other, gaps) if p % 2 == 0 else (gaps, other)
-        new, good = _sweep(one, two, cand, ticks, A, f, n_min)
+        new, good = _sweep(one, two, cand, ticks, A, f, window)
         if not good or new.sum() >= ticks.sum():
             break
+        gain = 1.0 - new.sum() / ticks.sum()
         ticks = np.minimum(new, ticks)
         tried = [*tried, ticks]
+        if gain < MIN_GAIN:  # another sweep would gain less still
+            break
     fwd = gaps if not gaps.reverse else other
     for ticks in tried[::-1]:  # the shortest whose speeds check out (the last, barring a rounding slip)
         lo, hi, ok = fwd.reachable(ticks, A, f)
@@ -391,6 +409,8 @@ def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, n_min, passes):
     return None
 
 
+#: A sweep that shortens the total by less than this fraction is the last of its stage.
+MIN_GAIN = 1e-4
 #: Rounds of knot boxes turned towards the planned velocities, and the sweeps against each.
 RECAPS = 1
 RECAP_PASSES = 2
@@ -439,8 +459,8 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     size = bucket_size(g)
     fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
     bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
-    ticks, _ = _sweep(fwd, bwd, cand, None, A, f, w.n_min, lookahead=LOOKAHEAD)
-    found = _improve(fwd, bwd, cand, [ticks], A, f, w.n_min, PASSES)
+    ticks, _ = _sweep(fwd, bwd, cand, None, A, f, w, lookahead=LOOKAHEAD)
+    found = _improve(fwd, bwd, cand, [ticks], A, f, w, PASSES)
     if found is None:
         return plan_sync(req)
     ticks, lo, hi, tried = found
@@ -449,7 +469,7 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     for _ in range(RECAPS):
         capk2 = recap(v, knot_directions(D, ticks / f), req.feed_mm_s, V)
         fwd2, bwd2 = (_Gaps(D, cruise, capm, capk2, size, reverse=r) for r in (False, True))
-        found = _improve(bwd2, fwd2, cand, [ticks], A, f, w.n_min, RECAP_PASSES)
+        found = _improve(bwd2, fwd2, cand, [ticks], A, f, w, RECAP_PASSES)
         if found is None or found[0].sum() >= ticks.sum():
             break
         capk = capk2
