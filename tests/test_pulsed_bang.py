@@ -122,3 +122,56 @@ def test_recap_boxes_hold_the_velocities_and_keep_the_path_within_the_cap():
     assert np.linalg.norm(corners, axis=2).max() <= F * (1 + 1e-12)
     along = recap(np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]), F, V)[0]
     assert along[0] == pytest.approx(F) and along[1] == pytest.approx(0.0)
+
+
+def test_look_ahead_sets_equal_stepping_through_the_gaps():
+    """A knot interval meets the depth-k look-ahead set exactly when projecting it through the next k gaps
+    (at their given durations, ending within ``[blo, bhi]``) leaves every axis non-empty."""
+    from jaxcnc.planners.pulsed.bang import ahead_sets
+
+    rng = np.random.default_rng(11)
+    A, cap = np.full(3, 300.0), np.full(3, 17.0)
+    for _ in range(60):
+        g = 4
+        D = rng.uniform(-0.4, 0.4, (g, 3))
+        ticks = rng.integers(238, 600, g)
+        cruise = rng.random(g) < 0.3
+        capm, capk = np.full((g, 3), 40.0), np.tile(cap, (g + 1, 1))
+        blo, bhi = np.full((g + 1, 3), -np.inf), np.full((g + 1, 3), np.inf)
+        blo[-1] = bhi[-1] = 0.0
+        slo, shi = ahead_sets(D, ticks, cruise, capm, capk, blo, bhi, A, 1e4, depth=3)
+        lo = rng.uniform(-15, 10, 3)
+        hi = lo + rng.uniform(0, 6, 3)
+        for k in (1, 2, 3):
+            met = bool(np.all(np.maximum(lo, slo[0, k - 1]) <= np.minimum(hi, shi[0, k - 1]) + 1e-9))
+            l, u, ok = lo, hi, True
+            for j in range(k):
+                okj, l, u = (
+                    np.asarray(x) for x in project(l, u, D[j], ticks[j] / 1e4, A, capm[j], capk[j + 1], cruise[j])
+                )
+                l, u = np.maximum(l, blo[j + 1]), np.minimum(u, bhi[j + 1])
+                ok = ok and bool(np.all(okj)) and bool(np.all(l <= u + 1e-9))
+            assert met == ok
+
+
+def test_candidates_admissible_ascending_and_near_the_plan():
+    """Every candidate is an admissible gap (some period count), the rows ascend, and a later sweep's
+    candidates run from the shortest up to the plan's own count, which is among them."""
+    from jaxcnc.planners.pulsed.bang import candidates, near_candidates
+    from jaxcnc.planners.pulsed.windows import pulse_window
+
+    w = pulse_window(GLASS)
+    rng = np.random.default_rng(2)
+    lo = rng.integers(1, 8000, 500)
+    c = candidates(lo, w)
+    assert np.all(np.diff(c, axis=1) >= 0) and np.all(c >= lo[:, None])
+
+    def admissible(n):
+        m = np.arange(1, 1000)[None]
+        return np.any((n[..., None] >= m * w.n_min) & (n[..., None] <= m * w.n_max), axis=-1)
+
+    assert np.all(admissible(c))
+    prev = c[np.arange(500), rng.integers(0, c.shape[1], 500)]
+    near = near_candidates(c[:, 0], prev, w)
+    assert np.all(np.diff(near, axis=1) >= 0) and np.all(admissible(near))
+    assert np.all(near[:, 0] == c[:, 0]) and np.all(near[:, -1] == prev)

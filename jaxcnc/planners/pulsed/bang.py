@@ -33,6 +33,7 @@ the first point is reached from rest (a straight move from the start) and the la
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from functools import partial
 
 import jax
@@ -69,8 +70,8 @@ def candidates(lo: np.ndarray, window: PulseWindow) -> np.ndarray:
     top = (m0[:, 0] + LATER_RANGES[-1] + 1) * n_max
     for r in GEOMETRIC:
         cols.append(snap_up_ticks(np.ceil(top * 1.3**r).astype(np.int64), n_min, n_max, idle)[0][:, None])
-    out = np.concatenate(cols, axis=1)
-    tangled = np.flatnonzero(np.any(np.diff(out, axis=1) < 0, axis=1))  # long jumps: period ranges overlap
+    out = np.maximum(np.concatenate(cols, axis=1), first[:, None])  # long jumps: the period ranges overlap
+    tangled = np.flatnonzero(np.any(np.diff(out, axis=1) < 0, axis=1))
     out[tangled] = np.sort(out[tangled], axis=1)
     return out
 
@@ -346,6 +347,13 @@ class _Gaps:
         """Per-gap (or per-knot) array in this direction, padded."""
         return _pad(a[::-1] if self.reverse else a, self.size + (a.shape[0] - self.g), fill)
 
+    def pick(self, ticks: np.ndarray, lo: np.ndarray, hi: np.ndarray, A, f) -> np.ndarray:
+        """Knot velocities ``(g+1, 3)`` (:func:`backward`, padded: the padding's knots at rest); forward only."""
+        g, size = self.g, self.size
+        args = (self.D, self.orient(ticks, 1), self.cruise, self.capm, self.capk)
+        v = backward(*args, _pad(lo, size + 1, 0.0), _pad(hi, size + 1, 0.0), A, f)
+        return np.asarray(v)[: g + 1]
+
     def reachable(self, ticks: np.ndarray, A, f):
         """``(lo, hi, ok)``: the speeds reachable from rest at each knot, in this direction (unpadded)."""
         lo, hi, ok = reachable(self.D, self.orient(ticks, 1), self.cruise, self.capm, self.capk, A, f)
@@ -435,6 +443,34 @@ def recap(v: np.ndarray, direction: np.ndarray, path_mm_s: float, v_max: np.ndar
     return np.minimum(np.sqrt(w2) * path_mm_s, v_max[None])
 
 
+_COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="bang-compile")
+
+
+def _precompile(size: int, A: np.ndarray, f: float) -> list[Future]:
+    """Compile the later sweeps' programs for ``size`` gaps in a thread while the first sweep runs.
+
+    XLA compiles outside the GIL, so on a machine with two cores this hides most of their compile time
+    (a fresh process compiles four programs); a program already compiled (or in the persistent cache)
+    costs a lookup.
+    """
+
+    def spec(shape, dtype):
+        return jax.ShapeDtypeStruct(shape, np.dtype(dtype))
+
+    n = A.shape[0]
+    gaps = (spec((size, n), "f8"), None, spec((size,), bool), spec((size, n), "f8"), spec((size + 1, n), "f8"))
+    knots = spec((size + 1, n), "f8")
+    sets = spec((size + 1, 1, n), "f8")
+    ticks = spec((size,), "i8")
+    near = spec((size, 2 + len(PREV_STEPS) + 1), "i8")
+    jobs = [
+        (forward, (gaps[0], near, *gaps[2:], knots, knots, sets, sets, A, f)),
+        (reachable, (gaps[0], ticks, *gaps[2:], A, f)),
+        (backward, (gaps[0], ticks, *gaps[2:], knots, knots, A, f)),
+    ]
+    return [_COMPILER.submit(lambda fn=fn, args=args: fn.lower(*args).compile()) for fn, args in jobs]
+
+
 @register_pulse_planner("bang")
 def plan_bang(req: PulseRequest) -> PulsePlan:
     """Plan with constant-acceleration pieces and knot speeds from interval propagation (module docstring)."""
@@ -457,14 +493,17 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     # long jumps (a triangle from rest at A would pass the cap) cruise through their middle half
     cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
     size = bucket_size(g)
+    pending = _precompile(size, A, f)
     fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
     bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
     ticks, _ = _sweep(fwd, bwd, cand, None, A, f, w, lookahead=LOOKAHEAD)
+    for job in pending:  # compiled beside the first sweep: wait rather than compile them twice
+        job.result()
     found = _improve(fwd, bwd, cand, [ticks], A, f, w, PASSES)
     if found is None:
         return plan_sync(req)
     ticks, lo, hi, tried = found
-    v = np.asarray(backward(D, ticks, cruise, capm, capk, lo, hi, A, np.float64(f)))
+    v = fwd.pick(ticks, lo, hi, A, f)
     # knot boxes turned towards the planned velocities (which stay inside): sweeps against these durations
     for _ in range(RECAPS):
         capk2 = recap(v, knot_directions(D, ticks / f), req.feed_mm_s, V)
@@ -475,7 +514,7 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
         capk = capk2
         ticks, lo, hi, more = found
         tried += more[1:]
-        v = np.asarray(backward(D, ticks, cruise, capm, capk, lo, hi, A, np.float64(f)))
+        v = fwd2.pick(ticks, lo, hi, A, f)
     passes = [int(t.sum()) for t in tried]
     # the approach: rest to rest from the start to the first point, the first pulse on the next whole tick
     ua, length, vp, a, t = rest_to_rest(req, req.home[None], pts[:1], np.array([req.rapid_mm_s]))
