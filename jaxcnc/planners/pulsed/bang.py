@@ -348,7 +348,7 @@ class _Gaps:
         return _pad(a[::-1] if self.reverse else a, self.size + (a.shape[0] - self.g), fill)
 
     def pick(self, ticks: np.ndarray, lo: np.ndarray, hi: np.ndarray, A, f) -> np.ndarray:
-        """Knot velocities ``(g+1, 3)`` (:func:`backward`, padded: the padding's knots at rest); forward only."""
+        """Knot velocities ``(g+1, 3)`` in this direction (:func:`backward`, padded: the padding's knots at rest)."""
         g, size = self.g, self.size
         args = (self.D, self.orient(ticks, 1), self.cruise, self.capm, self.capk)
         v = backward(*args, _pad(lo, size + 1, 0.0), _pad(hi, size + 1, 0.0), A, f)
@@ -385,35 +385,45 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, window: PulseWindow, loo
         ahead = ahead_sets(gaps.D, c[:, 0], gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, max(lookahead, 1))
     else:
         ahead = tuple(k[:, None] for k in knots)
-    ticks, _, _, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, *ahead, A, f)
+    ticks, lo, hi, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, *ahead, A, f)
     ticks = np.asarray(ticks, np.int64)[:g]
-    return (ticks[::-1] if gaps.reverse else ticks), bool(np.all(np.asarray(ok)[:g]))
+    lo, hi = np.array(lo)[: g + 1], np.array(hi)[: g + 1]
+    return (ticks[::-1] if gaps.reverse else ticks), bool(np.all(np.asarray(ok)[:g])), lo, hi
 
 
-def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, window: PulseWindow, passes):
+def _improve(gaps: _Gaps, other: _Gaps, cand, tried, A, f, window: PulseWindow, passes, v=None):
     """``passes`` sweeps against ``tried[-1]``, alternating direction (the first in ``other``'s direction),
-    until one gains less than :data:`MIN_GAIN`.
+    until one gains less than :data:`MIN_GAIN`; then the knot velocities (:meth:`_Gaps.pick`).
 
-    Returns ``(ticks, lo, hi, tried)`` for the shortest durations whose speeds check out (reachable from
-    rest, the last knot at rest), or ``None`` when none do.
+    The last sweep's own intervals serve the pick: reachable along its direction, the far knot at rest (every
+    gap met its completable set). Returns ``(ticks, v (g+1, 3), tried)``; with no sweep shorter, ``v`` as
+    given (or, without one, picked from a :func:`reachable` check); ``None`` when no durations check out.
     """
-    ticks = tried[-1]
+    ticks, last = tried[-1], None
     for p in range(passes):
         one, two = (other, gaps) if p % 2 == 0 else (gaps, other)
-        new, good = _sweep(one, two, cand, ticks, A, f, window)
+        new, good, lo, hi = _sweep(one, two, cand, ticks, A, f, window)
         if not good or new.sum() >= ticks.sum():
             break
         gain = 1.0 - new.sum() / ticks.sum()
-        ticks = np.minimum(new, ticks)
+        ticks = new  # never longer than the plan's: its count is the last candidate
         tried = [*tried, ticks]
+        last = (one, lo, hi)
         if gain < MIN_GAIN:  # another sweep would gain less still
             break
+    if last is not None:
+        one, lo, hi = last
+        lo[-1] = hi[-1] = 0.0
+        w = one.pick(ticks, lo, hi, A, f)
+        return ticks, (-w[::-1] if one.reverse else w), tried
+    if v is not None:
+        return ticks, v, tried
     fwd = gaps if not gaps.reverse else other
     for ticks in tried[::-1]:  # the shortest whose speeds check out (the last, barring a rounding slip)
         lo, hi, ok = fwd.reachable(ticks, A, f)
         if ok and np.all(lo[-1] <= EPS_MM_S) and np.all(hi[-1] >= -EPS_MM_S):
             lo[-1] = hi[-1] = 0.0
-            return ticks, lo, hi, tried
+            return ticks, fwd.pick(ticks, lo, hi, A, f), tried
     return None
 
 
@@ -496,25 +506,23 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     pending = _precompile(size, A, f)
     fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
     bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
-    ticks, _ = _sweep(fwd, bwd, cand, None, A, f, w, lookahead=LOOKAHEAD)
+    ticks = _sweep(fwd, bwd, cand, None, A, f, w, lookahead=LOOKAHEAD)[0]
     for job in pending:  # compiled beside the first sweep: wait rather than compile them twice
         job.result()
     found = _improve(fwd, bwd, cand, [ticks], A, f, w, PASSES)
     if found is None:
         return plan_sync(req)
-    ticks, lo, hi, tried = found
-    v = fwd.pick(ticks, lo, hi, A, f)
+    ticks, v, tried = found
     # knot boxes turned towards the planned velocities (which stay inside): sweeps against these durations
     for _ in range(RECAPS):
         capk2 = recap(v, knot_directions(D, ticks / f), req.feed_mm_s, V)
         fwd2, bwd2 = (_Gaps(D, cruise, capm, capk2, size, reverse=r) for r in (False, True))
-        found = _improve(bwd2, fwd2, cand, [ticks], A, f, w, RECAP_PASSES)
-        if found is None or found[0].sum() >= ticks.sum():
+        more = _improve(bwd2, fwd2, cand, [ticks], A, f, w, RECAP_PASSES, v=v)
+        if more is None or len(more[2]) == 1:
             break
         capk = capk2
-        ticks, lo, hi, more = found
+        ticks, v, more = more
         tried += more[1:]
-        v = fwd2.pick(ticks, lo, hi, A, f)
     passes = [int(t.sum()) for t in tried]
     # the approach: rest to rest from the start to the first point, the first pulse on the next whole tick
     ua, length, vp, a, t = rest_to_rest(req, req.home[None], pts[:1], np.array([req.rapid_mm_s]))
