@@ -31,7 +31,16 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.planners.grid import GRID_MARGIN, Grid, build_grid, device_spans, frames_at, interval_counts, is_curved
+from jaxcnc.planners.grid import (
+    GRID_MARGIN,
+    Grid,
+    build_grid,
+    device_spans,
+    frames_at,
+    interval_counts,
+    is_curved,
+    release_free_heap,
+)
 from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, junctions
 from jaxcnc.planners.lookahead_planner import plan_lookahead
 from jaxcnc.planners.phaseplane import constraint_rows, line_reach, solve_chunked, solve_window
@@ -265,7 +274,8 @@ def plan_topp(req: PlanRequest) -> Plan:
     n = len(spans)
     counts = hold_counts(req, interval_counts(spans))
     facts = _ProgramFacts.of(req)
-    pieces = []
+    segments = _SegmentTable(int(counts.sum()))
+    release_free_heap()  # the junctions' transients
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
     while first < n:
         reach = np.cumsum(counts[first:])
@@ -282,11 +292,13 @@ def plan_topp(req: PlanRequest) -> Plan:
                 window *= 2  # no node of this window is settled yet: look further ahead
                 continue
             commit = int(starts[-1])
-        pieces.append(_segments(out, grid, commit))
+        segments.append(out, grid, commit)
         x_start = float(out["x_node"][commit])
         first = int(grid.span[commit]) if commit < m else n
         window = WINDOW_INTERVALS
-    return _plan_of(pieces, req.machine.tick_hz)
+        grid = out = None
+        release_free_heap()  # this window's working memory, for the next one
+    return segments.plan(req.machine.tick_hz)
 
 
 #: Intervals planned at once; a longer program is planned window by window (the same plan).
@@ -348,42 +360,56 @@ def _solve_refined(
     raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
 
 
-def _segments(out: dict[str, np.ndarray], grid: Grid, commit: int) -> dict[str, np.ndarray]:
-    """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
-    seg = {k: out[k][:commit] for k in _SEGMENT_KEYS}
-    seg.update(
-        rest=out["x_node"][:commit] == 0.0,
-        length=grid.delta[:commit],
-        span=grid.span[:commit],
-        s_start=grid.s_start[:commit],
-    )
-    return seg
+class _SegmentTable:
+    """The plan's segments as the windows commit them, written straight into arrays allocated once.
 
-
-def _plan_of(pieces: list[dict[str, np.ndarray]], tick_hz: float) -> Plan:
-    """One :class:`Plan` of the windows' segments: aligned to ticks over the whole program.
-
-    Each key's pieces are copied once, straight into an array padded to the bucket (each window's freed as
-    it is copied); the plan keeps views of the first ``n`` rows.
+    ``capacity`` rows are allocated up front (the grid's interval count: every interval is a segment), so
+    the windows' outputs are freed window by window instead of being kept as pieces and joined at the end;
+    refinement that cuts more intervals grows the arrays. :meth:`plan` aligns them to ticks over the
+    whole program; the plan keeps views of the first ``n`` rows.
     """
-    n = sum(p["length"].shape[0] for p in pieces)
-    mb = bucket_size(n)
 
-    def joined(key: str, fill, rows: int) -> np.ndarray:
-        a = np.empty(rows, dtype=pieces[0][key].dtype)
-        at = 0
-        for p in pieces:
-            v = p.pop(key)
-            a[at : at + v.shape[0]] = v
-            at += v.shape[0]
-        a[n:] = fill
-        return a
+    _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {"rest": True, "length": 0.0, "span": 0, "s_start": 0.0}
+    _DTYPES = {"rest": np.bool_, "span": np.int64}
 
-    prof = {k: joined(k, 0.0, mb) for k in _SEGMENT_KEYS}
-    out = jax.device_get(_align(prof, joined("rest", True, mb), tick_hz))
-    out.update({k: prof[k][:n] for k in _SEGMENT_KEYS})
-    length, span, s_start = (joined(k, 0, n) for k in ("length", "span", "s_start"))
-    return plan_from_outputs(out, length, span, s_start, tick_hz)
+    def __init__(self, capacity: int) -> None:
+        self.n = 0
+        self.cols = {k: np.empty(bucket_size(capacity), self._DTYPES.get(k, np.float64)) for k in self._FILL}
+
+    def _reserve(self, rows: int) -> None:
+        have = next(iter(self.cols.values())).shape[0]
+        if rows > have:
+            grown = bucket_size(max(rows, have + have // 4))
+            for k, a in self.cols.items():
+                self.cols[k] = np.empty(grown, a.dtype)
+                self.cols[k][: self.n] = a[: self.n]
+
+    def append(self, out: dict[str, np.ndarray], grid: Grid, commit: int) -> None:
+        """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
+        self._reserve(self.n + commit)
+        rows = slice(self.n, self.n + commit)
+        for k in _SEGMENT_KEYS:
+            self.cols[k][rows] = out[k][:commit]
+        self.cols["rest"][rows] = out["x_node"][:commit] == 0.0
+        self.cols["length"][rows] = grid.delta[:commit]
+        self.cols["span"][rows] = grid.span[:commit]
+        self.cols["s_start"][rows] = grid.s_start[:commit]
+        self.n += commit
+
+    def plan(self, tick_hz: float) -> Plan:
+        """One :class:`Plan` of the segments, aligned to ticks over the whole program (padded to the bucket
+        of their count, as the compiled alignment expects). The tick alignment reads the segments' durations
+        alone: only those (and where the motion rests) are handed to the compiled program."""
+        n = self.n
+        mb = bucket_size(n)
+        self._reserve(mb)
+        cols = self.cols
+        for k, fill in self._FILL.items():
+            cols[k][n:mb] = fill
+        times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
+        out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
+        out.update({k: cols[k][:n] for k in _SEGMENT_KEYS})
+        return plan_from_outputs(out, cols["length"][:n], cols["span"][:n], cols["s_start"][:n], tick_hz)
 
 
 def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:

@@ -1,0 +1,78 @@
+"""Planning in bounded memory (issue 13) gives the same spans and plans, bit for bit.
+
+The memory itself is measured by ``jaxcnc bench plan`` (peak resident per size, fresh process); these
+tests pin what the memory work must not change: windows upload their own spans, the segments are
+written into arrays allocated once (and grown), spans are assembled field by field.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline
+from jaxcnc.geometry import SpanKind, build_spans
+from jaxcnc.geometry.spans import SPAN_FIELDS, pad_tables, slice_spans
+from jaxcnc.machine import parse_machine
+from jaxcnc.planners import plan_job
+from jaxcnc.planners.grid import device_spans, frames_at
+
+PLAN_FIELDS = (
+    "length", "v0", "vp", "v1", "a_acc", "a_dec", "t_acc", "t_cru", "t_dec",
+    "group_tick", "offset_ticks", "first_tick", "span", "s_start",
+)  # fmt: skip
+
+
+def _same_plan(a, b) -> None:
+    assert a.n_ticks == b.n_ticks
+    for f in PLAN_FIELDS:
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+def test_a_window_uploads_its_own_spans_and_evaluates_them_alike(corner_tol):
+    spans = build_spans(cam_polyline(400), corner_tol)
+    whole = device_spans(spans)
+    first, last = 37, 301
+    window = device_spans(spans, first, last)
+    idx = np.arange(first, last)
+    curved = idx[np.isin(spans.kind[idx], (SpanKind.ARC, SpanKind.BLEND))]
+    assert curved.size > 3
+    s = spans.length[curved] * 0.37
+    for a, b in zip(frames_at(whole, curved, s, 2), frames_at(window, curved - first, s, 2), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_slice_spans_keeps_rows_and_their_table_rows():
+    spans = build_spans(cam_polyline(300), 0.01)
+    sub = slice_spans(spans, 20, 180)
+    for f in SPAN_FIELDS:
+        if f != "item":
+            np.testing.assert_array_equal(getattr(sub, f), getattr(spans, f)[20:180])
+    arc = np.flatnonzero(sub.kind == SpanKind.ARC)
+    poly = np.flatnonzero(sub.kind == SpanKind.BLEND)
+    assert arc.size and poly.size
+    np.testing.assert_array_equal(sub.arcs.radius[sub.item[arc]], spans.arcs.radius[spans.item[20 + arc]])
+    np.testing.assert_array_equal(sub.polys.coeffs[sub.item[poly]], spans.polys.coeffs[spans.item[20 + poly]])
+    padded = pad_tables(sub, 64, 512)
+    assert len(padded.arcs) == 64 and len(padded.polys) == 512
+    np.testing.assert_array_equal(padded.arcs.radius[: len(sub.arcs)], sub.arcs.radius)
+    with pytest.raises(ValueError):
+        pad_tables(sub, 0, 512)
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+def test_segments_grown_from_a_small_table_plan_the_same(monkeypatch, corner_tol):
+    """The plan's segment arrays start at the grid's size; grown from one row they give the same plan."""
+    import jaxcnc.planners.topp as topp
+
+    prog = cam_polyline(1200)
+    m = parse_machine(BENCH_MACHINE + f"corner_tol_mm = {corner_tol}\n", "<bench>")
+    reference = plan_job(prog, m).plan
+    init = topp._SegmentTable.__init__
+    monkeypatch.setattr(topp._SegmentTable, "__init__", lambda self, capacity: init(self, 1))
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 10)  # several windows, each growing the arrays
+    windowed = plan_job(prog, m).plan
+    np.testing.assert_allclose(windowed.vp, reference.vp, rtol=0, atol=1e-9)
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 17)
+    _same_plan(plan_job(prog, m).plan, reference)
