@@ -112,17 +112,30 @@ def test_optimum_equals_brute_force(pts):
         assert path_bound(pts, win).ticks <= opt.ticks.sum()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "start", "n"), [("sparse", 40, 16), ("short-rows", 0, 16), ("text", 1974, 16)])
 def test_optimum_between_the_bound_and_bang(name, start, n):
-    """On hard-case windows: certified bound <= optimum <= bang's plan of the window (bang's ticks are the
-    first incumbent where the LP finds them feasible; the optimum is below them in any case)."""
+    """On hard-case windows: certified bound <= optimum (free ends) <= optimum at rest <= bang's plan of the
+    window (bang plans it from rest to rest; its ticks are the first incumbent where the LP finds them feasible)."""
     pts = clouds.HARD_CASES[name]()[start : start + n]
     planned = plan_points(PointJob(pts, None, np.arange(1, n + 1), name), GLASS, "bang")
     bang_ticks = np.diff(planned.plan.work_tick)
     bound = path_bound(pts)
     opt = optimum_window(pts, WIN, V_REQ, A_REQ, bound.gap_ticks, start_ticks=bang_ticks, **CAPS)
-    print(f"{name}: bang {bang_ticks.sum()} optimum {opt.ticks.sum()} bound {bound.ticks} nodes {opt.nodes}")
-    assert opt.proven
-    assert bound.ticks <= opt.ticks.sum() <= bang_ticks.sum()
+    rest = optimum_window(pts, WIN, V_REQ, A_REQ, bound.gap_ticks, start_ticks=bang_ticks, rest_ends=True, **CAPS)
+    print(f"{name}: bang {bang_ticks.sum()} at rest {rest.ticks.sum()} free {opt.ticks.sum()} bound {bound.ticks}")
+    assert opt.proven and rest.proven
+    assert bound.ticks <= opt.ticks.sum() <= rest.ticks.sum() <= bang_ticks.sum()
     assert feasible(pts, opt.ticks)
-    assert np.all(WIN.admissible(opt.ticks, opt.periods))
+    assert feasible_ticks(pts - pts[0], rest.ticks, WIN.tick_hz, V_REQ, A_REQ, rest_ends=True, **CAPS)
+    assert np.all(WIN.admissible(opt.ticks, opt.periods)) and np.all(WIN.admissible(rest.ticks, rest.periods))
+
+
+def test_window_bench_rows_are_ordered():
+    """The bench's window rows (jaxcnc bench pulsed-windows) on a short window: bound <= optimum with free ends
+    <= optimum at rest <= bang, each optimum proven."""
+    from jaxcnc.bench.pulsed_windows import window_rows
+
+    (row,) = window_rows(8, names=("short-rows",), exact=False)
+    assert row["optimum_free_proven"] and row["optimum_rest_proven"]
+    assert row["bound_s"] <= row["optimum_free_s"] <= row["optimum_rest_s"] <= row["bang_s"] + 1e-12

@@ -129,6 +129,7 @@ def feasible_ticks(
     steps: int = STEPS_PER_GAP,
     feed_mm_s: float | None = None,
     rapid_mm_s: float | None = None,
+    rest_ends: bool = False,
 ) -> bool:
     """Whether a motion with ``steps`` constant accelerations per gap burns ``pts`` ``(n, d)`` at gaps ``ticks``.
 
@@ -138,7 +139,8 @@ def feasible_ticks(
     end) are kept *inside* the Euclidean ones, so a feasible answer is a real motion within them: one
     moving axis, its box; two, a polygon of :data:`POLYGON_SIDES` sides inside the circle; three, the
     least-moving axis within :data:`Z_SHARE` of the cap and the polygon inside the rest.
-    Without path caps the axes are independent (one program each).
+    Without path caps the axes are independent (one program each). ``rest_ends``: at rest at the first and
+    last point instead (a window planned alone, as the planners plan it).
     """
     from scipy.optimize import linprog
     from scipy.sparse import block_diag, bmat, coo_matrix, csr_matrix, hstack, vstack
@@ -162,6 +164,8 @@ def feasible_ticks(
         caps[:] = rapid_mm_s
     if feed_mm_s is not None:
         caps[::steps] = np.minimum(caps[::steps], feed_mm_s)
+    if rest_ends:
+        caps[[0, -1]] = 0.0
     if not np.isfinite(caps).any() or len(moving) <= 1:
         for k in moving:
             D = np.diff(pts[:, k])

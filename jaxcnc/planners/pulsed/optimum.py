@@ -10,7 +10,8 @@ burned in order, over a fixed **motion model** — the one the verifying linear 
   the speed is linear per step), both through the same polygon *inside* the Euclidean caps as the verifying
   LP (:data:`~.exact.POLYGON_SIDES` sides for the two axes that move most, the third within
   :data:`~.exact.Z_SHARE` of the cap);
-- the beam on each point at its pulse, the window's end speeds free (a window cut out of a job);
+- the beam on each point at its pulse, the window's end speeds free (a window cut out of a job) or, with
+  ``rest_ends``, zero (the window planned alone, as the planners plan it);
 - each gap a whole number of ticks ``d_g`` with ``m n_min <= d_g <= m n_max`` for some ``m >= 1``.
 
 It is the minimum of ``Σ d_g`` over the admissible tick vectors at which that linear program is feasible;
@@ -101,7 +102,7 @@ class _Model:
     Variables: per moving axis the speeds at the ``n + 1`` step ends, then the ``g`` gap durations in ticks.
     """
 
-    def __init__(self, pts, tick_hz, v_max, a_max, steps, feed_mm_s, rapid_mm_s):
+    def __init__(self, pts, tick_hz, v_max, a_max, steps, feed_mm_s, rapid_mm_s, rest_ends=False):
         D_all = np.diff(pts, axis=0)
         self.g = g = D_all.shape[0]
         self.steps = steps
@@ -144,6 +145,8 @@ class _Model:
             caps[:] = rapid_mm_s
         if feed_mm_s is not None:
             caps[::steps] = np.minimum(caps[::steps], feed_mm_s)
+        if rest_ends:
+            caps[[0, -1]] = 0.0
         self.bounds_v = []
         box = [np.full(n + 1, np.inf)] * m
         self.A_cap, self.b_cap = None, None
@@ -254,6 +257,7 @@ def optimum_window(
     max_nodes: int = 20_000,
     max_seconds: float = 120.0,
     tighten_root: bool = True,
+    rest_ends: bool = False,
 ) -> OptimumWindow:
     """The least burn time of ``points`` ``(n, 3)`` mm in this order over the motion model (module docstring).
 
@@ -262,7 +266,8 @@ def optimum_window(
     bound on each gap alone (e.g. ``lower_bound_travel(...).gap_ticks`` at the machine's limits, which
     contain these). ``start_ticks``: a plan's tick counts, the first incumbent where the LP finds them
     feasible. Stops after ``max_nodes`` boxes or ``max_seconds``; then ``proven`` is false and
-    ``lower_ticks`` of the result is the least bound among the boxes left.
+    ``lower_ticks`` of the result is the least bound among the boxes left. ``rest_ends``: at rest at the
+    window's first and last point (as a planner plans the window alone) instead of free end speeds.
     """
     t0 = time.perf_counter()
     f, n_min, n_max, idle = window.tick_hz, window.n_min, window.n_max, window.idle_pulses
@@ -275,7 +280,7 @@ def optimum_window(
     lo0 = snap_up_ticks(np.maximum(np.asarray(lower_ticks, dtype=np.int64), n_min), n_min, n_max, idle)[0]
 
     def feasible(ticks) -> bool:
-        return feasible_ticks(pts, ticks, f, V, A, steps, feed_mm_s, rapid_mm_s)
+        return feasible_ticks(pts, ticks, f, V, A, steps, feed_mm_s, rapid_mm_s, rest_ends)
 
     lps = 0
     best = None
@@ -294,7 +299,7 @@ def optimum_window(
         if best is None:
             raise PlanningError("no motion found for the window within 9 x its gaps' own bounds")
     start_total = int(best.sum())
-    model = _Model(pts, f, V, A, steps, feed_mm_s, rapid_mm_s)
+    model = _Model(pts, f, V, A, steps, feed_mm_s, rapid_mm_s, rest_ends)
 
     def limit_hi(lo: np.ndarray, ub: int) -> np.ndarray:
         return _snap_down(ub - 1 - (lo.sum() - lo), window)
