@@ -585,6 +585,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.pulsed import run_pulsed_benchmarks
 
         results["pulsed"] = run_pulsed_benchmarks(programs=args.programs, check=args.check)
+    if args.suite == "pulsed-windows":  # minutes (an optimum per window): not part of 'all'
+        from jaxcnc.bench.pulsed_windows import run_pulsed_windows
+
+        results["pulsed-windows"] = run_pulsed_windows()
     if args.suite in ("all", "pbf"):
         from jaxcnc.bench.pbf import run_pbf_benchmarks
 
@@ -926,6 +930,7 @@ def build_parser() -> argparse.ArgumentParser:
             "player",
             "planners",
             "pulsed",
+            "pulsed-windows",
             "pbf",
             "split",
             "vibration",
