@@ -114,6 +114,16 @@ def window_rows(
         job = PointJob(pts, None, np.arange(1, len(pts) + 1), name)
         ticks = {p: np.diff(plan_points(job, machine, p).plan.work_tick) for p in ("sync", "bang")}
         bound = lower_bound_travel(pts, win, V, A, feed_mm_s=machine.path.feed, rapid_mm_s=machine.path.rapid)
+        ex_s, starts = None, [ticks["bang"]]
+        if exact:
+            from jaxcnc.planners.pulsed.exact import exact_window
+
+            try:
+                ex = exact_window(pts, win, V_req, A_req, guess_ticks=ticks["bang"], descend=True, **caps)
+                ex_s = ex.seconds
+                starts.append(ex.ticks)  # a verified motion with free ends: a first incumbent for that optimum
+            except Exception as exc:  # noqa: BLE001 - a local solver's failure is a result here, not an error
+                print(f"{name}: exact reference failed: {exc}")
         opt = {}
         for ends in ("rest", "free"):
             opt[ends] = optimum_window(
@@ -122,20 +132,11 @@ def window_rows(
                 V_req,
                 A_req,
                 bound.gap_ticks,
-                start_ticks=ticks["bang"],
+                start_ticks=np.array(starts),
                 max_seconds=max_seconds,
                 rest_ends=ends == "rest",
                 **caps,
             )
-        ex_s = None
-        if exact:
-            from jaxcnc.planners.pulsed.exact import exact_window
-
-            try:
-                ex = exact_window(pts, win, V_req, A_req, guess_ticks=ticks["bang"], descend=True, **caps)
-                ex_s = ex.seconds
-            except Exception as exc:  # noqa: BLE001 - a local solver's failure is a result here, not an error
-                print(f"{name}: exact reference failed: {exc}")
         rest, free = opt["rest"], opt["free"]
         row = {
             "cloud": name,

@@ -264,9 +264,9 @@ def optimum_window(
     ``v_max``, ``a_max`` ``(3,)``: the limits the motion keeps (a planner's: the request's);
     ``feed_mm_s``/``rapid_mm_s`` the path caps (``bang``'s). ``lower_ticks`` ``(n-1,)``: a certified lower
     bound on each gap alone (e.g. ``lower_bound_travel(...).gap_ticks`` at the machine's limits, which
-    contain these). ``start_ticks``: a plan's tick counts, the first incumbent where the LP finds them
-    feasible. Stops after ``max_nodes`` boxes or ``max_seconds``; then ``proven`` is false and
-    ``lower_ticks`` of the result is the least bound among the boxes left. ``rest_ends``: at rest at the
+    contain these). ``start_ticks``: a plan's tick counts ``(g,)`` or several ``(k, g)``, the first incumbent
+    (the shortest the LP finds feasible). Stops after ``max_nodes`` boxes or ``max_seconds``; then ``proven``
+    is false and ``lower_ticks`` of the result is the least bound among the boxes left. ``rest_ends``: at rest at the
     window's first and last point (as a planner plans the window alone) instead of free end speeds.
     """
     t0 = time.perf_counter()
@@ -284,11 +284,12 @@ def optimum_window(
 
     lps = 0
     best = None
-    if start_ticks is not None:
-        lps += 1
-        st = np.asarray(start_ticks, dtype=np.int64)
-        if feasible(st):
-            best = st.copy()
+    if start_ticks is not None:  # one plan's ticks (g,) or several (k, g): the shortest feasible one
+        for st in sorted(np.atleast_2d(np.asarray(start_ticks, dtype=np.int64)), key=lambda t: int(t.sum())):
+            lps += 1
+            if feasible(st):
+                best = st.copy()
+                break
     if best is None:  # every gap's own bound stretched by a common factor until a motion exists
         for i in range(400):
             trial = snap_up_ticks(np.ceil(lo0 * (1.0 + 0.02 * i)).astype(np.int64), n_min, n_max, idle)[0]
