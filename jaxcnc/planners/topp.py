@@ -275,6 +275,7 @@ def plan_topp(req: PlanRequest) -> Plan:
     counts = hold_counts(req, interval_counts(spans))
     facts = _ProgramFacts.of(req)
     segments = _SegmentTable(int(counts.sum()))
+    segments.prepare(req.machine.tick_hz)
     release_free_heap()  # the junctions' transients
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
     while first < n:
@@ -298,6 +299,7 @@ def plan_topp(req: PlanRequest) -> Plan:
         window = WINDOW_INTERVALS
         grid = out = None
         release_free_heap()  # this window's working memory, for the next one
+    del facts, counts  # (n,) arrays the alignment's transients need more than they do
     return segments.plan(req.machine.tick_hz)
 
 
@@ -360,6 +362,10 @@ def _solve_refined(
     raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
 
 
+#: Buckets whose tick alignment this process has compiled (see :meth:`_SegmentTable.prepare`).
+_ALIGN_COMPILED: set[int] = set()
+
+
 class _SegmentTable:
     """The plan's segments as the windows commit them, written straight into arrays allocated once.
 
@@ -375,6 +381,16 @@ class _SegmentTable:
     def __init__(self, capacity: int) -> None:
         self.n = 0
         self.cols = {k: np.empty(bucket_size(capacity), self._DTYPES.get(k, np.float64)) for k in self._FILL}
+
+    def prepare(self, tick_hz: float) -> None:
+        """Compile the tick alignment for the bucket the plan will most likely have, now, while little memory
+        is in use: compiled at the end, the compiler's working memory would sit on top of the whole plan's.
+        Once per bucket and process (a run on zeros, discarded)."""
+        mb = next(iter(self.cols.values())).shape[0]
+        if mb not in _ALIGN_COMPILED:
+            zero = np.zeros(mb)
+            _align({"t_acc": zero, "t_cru": zero, "t_dec": zero}, np.ones(mb, bool), tick_hz)
+            _ALIGN_COMPILED.add(mb)
 
     def _reserve(self, rows: int) -> None:
         have = next(iter(self.cols.values())).shape[0]
@@ -408,6 +424,7 @@ class _SegmentTable:
             cols[k][n:mb] = fill
         times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
         out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
+        del times
         out.update({k: cols[k][:n] for k in _SEGMENT_KEYS})
         return plan_from_outputs(out, cols["length"][:n], cols["span"][:n], cols["s_start"][:n], tick_hz)
 
