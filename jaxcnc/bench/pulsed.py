@@ -10,7 +10,8 @@ times (first to last work pulse), the lower bound (intervals × shortest allowed
 reductions, beside the documents' own figures. ``check=True`` also writes every table and
 verifies limits at every tick, every pulse interval and every hit.
 
-A second table (:func:`run_hard_cases`) runs ``sync`` and ``bang`` on the hard-case clouds of
+The program table has ``bang`` beside ``sync`` (burn, ratio to LBt, planning time). A second table
+(:func:`run_hard_cases`) runs ``sync`` and ``bang`` on the hard-case clouds of
 :mod:`jaxcnc.io.clouds` (holes, short rows, misaligned rows, sparse, 3-D text, and points inside a
 real STL of the corpus) against the travel-aware lower bound ``LBt``
 (:mod:`jaxcnc.planners.pulsed.bound`).
@@ -79,8 +80,9 @@ def program_points(index: int, n_points: int) -> np.ndarray:
     )
 
 
-def _plan_wall_cold(n_points: int) -> float:
-    """Seconds to plan program 4 with ``sync`` in a fresh process without the compile cache."""
+def _plan_wall_cold(n_points: int, planner: str = "sync") -> float:
+    """Seconds to plan program 4 with ``planner`` in a fresh process without the compile cache (compile and
+    plan; the imports come before the clock starts)."""
     code = (
         "import time, numpy as np\n"
         "from jaxcnc.bench.pulsed import glass_engraver, program_points\n"
@@ -89,7 +91,7 @@ def _plan_wall_cold(n_points: int) -> float:
         "job = PointJob(pts, None, np.arange(1, len(pts) + 1), 'program-4')\n"
         "t0 = time.perf_counter()\n"
         "from jaxcnc.planners.pulsed import plan_points\n"
-        "plan_points(job, glass_engraver(), 'sync')\n"
+        f"plan_points(job, glass_engraver(), {planner!r})\n"
         "print(time.perf_counter() - t0)\n"
     )
     env = dict(os.environ, JAXCNC_CACHE_DIR="")
@@ -120,7 +122,7 @@ def run_pulsed_benchmarks(
         pts = program_points(i, n)
         job = PointJob(pts, None, np.arange(1, n + 1), f"program-{i}")
         res = {}
-        for name in ("stop-and-go", "seed", "sync"):
+        for name in ("stop-and-go", "seed", "sync", "bang"):
             t0 = time.perf_counter()
             planned = plan_points(job, machine, name)
             res[name] = (planned, time.perf_counter() - t0)
@@ -139,6 +141,9 @@ def run_pulsed_benchmarks(
             "lower_bound_travel_s": lbt,
             "sync_plan_wall_s": res["sync"][1],
             "sync_idle_pulses": res["sync"][0].plan.stats["idle_pulses"],
+            "bang_s": res["bang"][0].plan.burn_time_s,
+            "bang_plan_wall_s": res["bang"][1],
+            "bang_idle_pulses": res["bang"][0].plan.stats["idle_pulses"],
         }
         if check:
             row["check"] = _check_tables({k: v[0] for k, v in res.items()}, machine)
@@ -148,7 +153,8 @@ def run_pulsed_benchmarks(
             f"{i:>2} {n:>7} | {row['doc_old_s']:>7.0f} {row['doc_new_s']:>7.0f} {100 * doc_red:>6.1f} | "
             f"{sg:>8.1f} {1e3 * sg / n:>5.1f} {seed:>8.1f} {100 * (1 - seed / sg):>5.1f} {sync:>8.1f} "
             f"{100 * (1 - sync / sg):>5.1f} {lb:>8.1f} {sync / lb:>7.4f} {seed / lb:>7.4f} | {res['sync'][1]:>6.2f}"
-            f" | LBt {lbt:>8.1f} sync/LBt {sync / lbt:.4f}" + (f"  {row['check']}" if check else "")
+            f" | LBt {lbt:>8.1f} sync/LBt {sync / lbt:.4f} bang {row['bang_s']:>8.1f} bang/LBt "
+            f"{row['bang_s'] / lbt:.4f} ({res['bang'][1]:.2f} s)" + (f"  {row['check']}" if check else "")
         )
     red = np.array([1 - r["sync_s"] / r["stop_and_go_s"] for r in rows])
     ratio = np.array([r["sync_s"] / r["lower_bound_s"] for r in rows])
@@ -159,8 +165,9 @@ def run_pulsed_benchmarks(
         f"algorithm: {100 * doc.min():.1f}-{100 * doc.max():.1f} % (mean {100 * doc.mean():.1f} %)"
     )
     if cold and 4 in chosen:
-        cold_s = _plan_wall_cold(n_points=108_400)
-        print(f"planning program 4 (108,400 points) with sync in a fresh process, no compile cache: {cold_s:.2f} s")
+        for planner in ("sync", "bang"):
+            cold_s = _plan_wall_cold(n_points=108_400, planner=planner)
+            print(f"planning program 4 (108,400 points) with {planner}, fresh process, no compile cache: {cold_s:.2f}s")
     if hard and programs is None:
         rows += run_hard_cases(check=check)
     return rows
