@@ -10,15 +10,17 @@ the interval of reachable exit speeds, per axis, in closed form.
 
 Durations are chosen by greedy sweeps (``lax.scan`` s over the gaps, nothing sampled):
 
-1. A forward sweep gives each gap its shortest admissible candidate tick count after which every axis'
-   interval stays non-empty and the next :data:`LOOKAHEAD` gaps still fit at their shortest.
-2. :data:`PASSES` sweeps, alternately backward and forward, each against the previous durations: the
+1. A forward sweep over a few candidates per gap (:func:`candidates`) gives each gap the shortest whose exit
+   interval meets the most look-ahead sets (:func:`ahead_sets`: the speeds from which the next 1..
+   :data:`LOOKAHEAD` gaps pass at their shortest; all depths up to the deepest any candidate meets).
+2. Up to :data:`PASSES` sweeps, alternately backward and forward, each against the previous durations: the
    speeds from which the rest of the job can still be completed are those reachable from the far end's
    rest with the previous durations (a :func:`reachable` scan the other way, time reversed), so a sweep
-   takes each gap's shortest candidate whose exit interval meets that set — it never boxes itself in,
-   the previous duration is always a candidate, and the total never grows.
-3. A forward :func:`reachable` scan with the final durations and a backward scan pick each knot's speed
-   inside its interval (nearest the mean of its neighbours' mean speeds).
+   takes each gap's shortest candidate (:func:`near_candidates`) whose exit interval meets that set — it
+   never boxes itself in, the previous duration is always a candidate, and the total never grows. A stage
+   ends after a sweep gaining less than :data:`MIN_GAIN`.
+3. A backward scan picks each knot's speed inside the last sweep's intervals (nearest the mean of its
+   neighbours' mean speeds), turned to the forward direction where that sweep ran backward.
 
 Speed caps (path speed, Euclidean, made linear as a per-axis box whose diagonal is the cap,
 :func:`path_caps`): at a pulse the beam burns, so the path speed there is within the feed; between pulses
@@ -172,7 +174,7 @@ def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     return ok & (L <= U + 1e-12 * (1 + xp.abs(U))), L, xp.maximum(L, U)
 
 
-#: Gaps ahead the first pass checks a duration against: the next gaps at their shortest candidates must fit.
+#: Look-ahead depths of the first sweep (:func:`ahead_sets`): candidates are ranked by how many they meet.
 LOOKAHEAD = 4
 #: Passes after the first: each scans the other way and keeps every gap at most as long as before.
 PASSES = 1
