@@ -363,12 +363,13 @@ class _Gaps:
         return np.array(lo)[: g + 1], np.array(hi)[: g + 1], bool(np.all(np.asarray(ok)[:g]))
 
 
-def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, window: PulseWindow, lookahead=0):
+def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, window: PulseWindow, lookahead=0, ready=None):
     """One greedy sweep in ``gaps``' direction; with ``prev`` ticks, every gap at most as long as in ``prev``.
 
     The speeds from which the rest can be completed are those reachable, the other way, from the far
     end's rest with ``prev``'s durations: the sweep never boxes itself in, and ``prev`` is always a choice.
-    Without ``prev``, each gap looks ``lookahead`` gaps ahead (:func:`ahead_sets`).
+    Without ``prev``, each gap looks ``lookahead`` gaps ahead (:func:`ahead_sets`). ``ready``: a compile of the
+    sweep's program under way in a thread, waited for rather than compiled twice.
     """
     g, size = gaps.g, gaps.size
     if prev is None:
@@ -387,6 +388,8 @@ def _sweep(gaps: _Gaps, other: _Gaps, cand, prev, A, f, window: PulseWindow, loo
         ahead = ahead_sets(gaps.D, c[:, 0], gaps.cruise, gaps.capm, gaps.capk, *knots, A, f, max(lookahead, 1))
     else:
         ahead = tuple(k[:, None] for k in knots)
+    if ready is not None:
+        ready.result()
     ticks, lo, hi, ok = forward(gaps.D, c, gaps.cruise, gaps.capm, gaps.capk, *knots, *ahead, A, f)
     ticks = np.asarray(ticks, np.int64)[:g]
     lo, hi = np.array(lo)[: g + 1], np.array(hi)[: g + 1]
@@ -455,15 +458,15 @@ def recap(v: np.ndarray, direction: np.ndarray, path_mm_s: float, v_max: np.ndar
     return np.minimum(np.sqrt(w2) * path_mm_s, v_max[None])
 
 
-_COMPILER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="bang-compile")
+_COMPILER = ThreadPoolExecutor(max_workers=2, thread_name_prefix="bang-compile")
 
 
-def _precompile(size: int, A: np.ndarray, f: float) -> list[Future]:
-    """Compile the later sweeps' programs for ``size`` gaps in a thread while the first sweep runs.
+def _precompile(size: int, n_first: int, A: np.ndarray, f: float) -> list[Future]:
+    """Compile the sweeps' programs for ``size`` gaps (``n_first`` candidates in the first) in threads.
 
-    XLA compiles outside the GIL, so on a machine with two cores this hides most of their compile time
-    (a fresh process compiles four programs); a program already compiled (or in the persistent cache)
-    costs a lookup.
+    XLA compiles outside the GIL, so on a machine with two cores this hides most of the compile time (a
+    fresh process compiles four programs) behind the first sweep's preparation and run; a program already
+    compiled (or in the persistent cache) costs a lookup. The first future is the first sweep's program.
     """
 
     def spec(shape, dtype):
@@ -476,6 +479,19 @@ def _precompile(size: int, A: np.ndarray, f: float) -> list[Future]:
     ticks = spec((size,), "i8")
     near = spec((size, 2 + len(PREV_STEPS) + 1), "i8")
     jobs = [
+        (
+            forward,
+            (
+                gaps[0],
+                spec((size, n_first), "i8"),
+                *gaps[2:],
+                knots,
+                knots,
+                *[spec((size + 1, LOOKAHEAD, n), "f8")] * 2,
+                A,
+                f,
+            ),
+        ),
         (forward, (gaps[0], near, *gaps[2:], knots, knots, sets, sets, A, f)),
         (reachable, (gaps[0], ticks, *gaps[2:], A, f)),
         (backward, (gaps[0], ticks, *gaps[2:], knots, knots, A, f)),
@@ -505,10 +521,10 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     # long jumps (a triangle from rest at A would pass the cap) cruise through their middle half
     cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
     size = bucket_size(g)
-    pending = _precompile(size, A, f)
+    pending = _precompile(size, cand.shape[1], A, f)
     fwd = _Gaps(D, cruise, capm, capk, size, reverse=False)
     bwd = _Gaps(D, cruise, capm, capk, size, reverse=True)
-    ticks = _sweep(fwd, bwd, cand, None, A, f, w, lookahead=LOOKAHEAD)[0]
+    ticks = _sweep(fwd, bwd, cand, None, A, f, w, lookahead=LOOKAHEAD, ready=pending[0])[0]
     for job in pending:  # compiled beside the first sweep: wait rather than compile them twice
         job.result()
     found = _improve(fwd, bwd, cand, [ticks], A, f, w, PASSES)
