@@ -376,15 +376,7 @@ def solve_window(
     gu, gx, h = rows
     cap_b = h[-2]
     if curved:
-        cap_fn, back_fn, fwd_fn = _forms(bands)
-        x_static = cap_fn(gu, gx, h, cap_a)
-        alpha, beta = back_fn(gu, gx, h, delta)
-        k = backward_scan(x_static, alpha, beta, x_end, cap_b)
-        unbounded = x_static  # F_j(∞): each term with K_{j+1} replaced by its own end cap
-        for a, b in zip(alpha, beta, strict=True):
-            unbounded = jnp.minimum(unbounded, jnp.where(a > 0, a * cap_b + b, b))
-        x = forward_scan(*fwd_fn(gu, gx, h, delta), delta, k, x_start)
-        return x, k[:-1] >= unbounded, k[0]
+        return solve_pieces(window_pieces(rows, delta, cap_a, bands), x_end, x_start)
     # Lines only (gx = 0 on the axis rows): the node caps and min(B, x + D) in both directions.
     node_cap = jnp.concatenate([cap_a, x_end[None]])
     node_cap = node_cap.at[1:].min(cap_b)  # x_b ≤ cap_b
@@ -393,6 +385,38 @@ def solve_window(
     back = forward_pass(node_cap[::-1], jnp.concatenate([zero, reach[::-1]]))[::-1]
     x = forward_pass(back.at[0].min(x_start), jnp.concatenate([zero, reach]))
     return x, back[:-1] >= node_cap[:-1], back[0]
+
+
+def window_pieces(rows: Rows, delta: jnp.ndarray, cap_a: jnp.ndarray, bands: bool = False) -> dict:
+    """What the two passes of a curved window read, each ``(m,)`` (lists of them for the pieces).
+
+    ``x_static``, the backward pieces ``alpha``/``beta``, ``cap_b``, the forward pieces ``a``/``b``.
+    Elementwise work over the whole window, meant to be compiled apart from the passes
+    (:func:`solve_pieces`): XLA's CPU backend copies an elementwise producer into each of its consumers, so
+    compiled with anything more that reads ``x_static`` or the pieces (the scans, each node's ``F_j(∞)``)
+    the divisions of the static cap and the pieces are computed two or three times over (measured: 2–3×
+    the time of this alone).
+    """
+    gu, gx, h = rows
+    cap_fn, back_fn, fwd_fn = _forms(bands)
+    cap_b = h[-2]
+    x_static = cap_fn(gu, gx, h, cap_a)
+    alpha, beta = back_fn(gu, gx, h, delta)
+    a_fwd, b_fwd = fwd_fn(gu, gx, h, delta)
+    return dict(x_static=x_static, alpha=alpha, beta=beta, cap_b=cap_b, a=a_fwd, b=b_fwd, delta=delta)
+
+
+def solve_pieces(
+    pieces: dict, x_end: jnp.ndarray, x_start: jnp.ndarray | float = 0.0
+) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """:func:`solve_window` (curved) from :func:`window_pieces`: the backward and the forward scan."""
+    x_static, alpha, beta, cap_b = (pieces[k] for k in ("x_static", "alpha", "beta", "cap_b"))
+    k = backward_scan(x_static, alpha, beta, x_end, cap_b)
+    unbounded = x_static  # F_j(∞): each term with K_{j+1} replaced by its own end cap
+    for a, b in zip(alpha, beta, strict=True):
+        unbounded = jnp.minimum(unbounded, jnp.where(a > 0, a * cap_b + b, b))
+    x = forward_scan(pieces["a"], pieces["b"], pieces["delta"], k, x_start)
+    return x, k[:-1] >= unbounded, k[0]
 
 
 def _forms(bands: bool) -> tuple[Callable, Callable, Callable]:
