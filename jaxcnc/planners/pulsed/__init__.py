@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -66,10 +67,11 @@ class PlannedPoints:
         """Intervals between work pulses × the shortest period the lamp allows."""
         return (len(self.job) - 1) * self.window.shortest_period_s
 
-    @property
+    @cached_property
     def lower_bound_travel_s(self) -> float:
         """A certified bound that also counts travel across gaps (:mod:`.bound`), at the machine's limits:
-        the axes' ``v_max``/``a_max`` and the path limits the planners honour (feed at pulses, rapid)."""
+        the axes' ``v_max``/``a_max`` and the path limits the planners honour (feed at pulses, rapid).
+        Computed once (seconds on clouds with long jump chains)."""
         v_max, a_max, _ = machine_limits(self.machine)
         path = self.machine.path
         return lower_bound_travel(
