@@ -76,3 +76,37 @@ def test_segments_grown_from_a_small_table_plan_the_same(monkeypatch, corner_tol
     np.testing.assert_allclose(windowed.vp, reference.vp, rtol=0, atol=1e-9)
     monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 17)
     _same_plan(plan_job(prog, m).plan, reference)
+
+
+def _window(rng, v0: np.ndarray, v1: np.ndarray):
+    from types import SimpleNamespace
+
+    import jaxcnc.planners.topp as topp
+
+    m = v0.size
+    out = {k: rng.uniform(1e-4, 1e-3, m) for k in topp._SEGMENT_KEYS}
+    out.update(v0=v0, v1=v1, x_node=np.r_[v0, v1[-1:]] ** 2)
+    return out, SimpleNamespace(delta=rng.uniform(0.1, 1.0, m), span=np.arange(m), s_start=np.zeros(m))
+
+
+@pytest.mark.parametrize("split", ["shared", "window", "boundary", "signed zero"])
+def test_segment_table_shares_v1_with_the_next_v0_only_where_their_bits_agree(split):
+    import jaxcnc.planners.topp as topp
+
+    rng = np.random.default_rng(7)
+    v = rng.uniform(1.0, 2.0, 12)
+    v0a, v1a, v0b, v1b = v[:5].copy(), v[1:6].copy(), v[5:11].copy(), v[6:12].copy()
+    if split == "window":
+        v1a[1] += 1e-12  # inside the first window: v1[1] is not v0[2]
+    elif split == "boundary":
+        v0b[0] += 1e-12  # the second window starts elsewhere than the first one ended
+    elif split == "signed zero":
+        v1a[-1], v0b[0] = -0.0, 0.0
+    table = topp._SegmentTable(4)  # grown on the way
+    for v0, v1 in ((v0a, v1a), (v0b, v1b)):
+        out, grid = _window(rng, v0, v1)
+        table.append(out, grid, v0.size)
+    plan = table.plan(1000.0)
+    assert np.array_equal(plan.v0.view(np.int64), np.r_[v0a, v0b].view(np.int64))
+    assert np.array_equal(plan.v1.view(np.int64), np.r_[v1a, v1b].view(np.int64))
+    assert np.shares_memory(plan.v0, plan.v1) == (split == "shared")

@@ -231,9 +231,9 @@ def release_free_heap() -> None:
     """Hand the C heap's free pages back to the operating system (glibc's ``malloc_trim``; a no-op elsewhere).
 
     The arrays of a planning stage or window (NumPy's and XLA's alike) are freed to glibc's heap, which keeps
-    pages it cannot trim from the top mapped: planning a long program window by window would otherwise
-    grow the resident memory by what earlier stages and windows left behind. Called between stages and
-    windows; costs a walk over the heap's free chunks (well under a millisecond per window).
+    pages it cannot trim from the top mapped, in pieces a later stage's larger arrays do not fit: the resident
+    memory of a long program would grow by what earlier stages left behind. The cost is in the page faults
+    of memory used again afterwards, so large plans call it between stages only (``topp.TRIM_SEGMENTS``).
     """
     trim = _malloc_trim()
     if trim is not None:

@@ -15,7 +15,6 @@ from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.machine import AxisConfig, MachineConfig
-from jaxcnc.planners.grid import release_free_heap
 from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, request_limits
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
 from jaxcnc.planners.smoothing import jerk_limited
@@ -109,7 +108,6 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
         raise
     axis_source = _check_axes(program, machine)
     spans = build_spans(program, machine.path.corner_tol_mm)
-    release_free_heap()  # what building the spans left in the heap
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)

@@ -340,7 +340,9 @@ def plan_topp(req: PlanRequest) -> Plan:
     facts = _ProgramFacts.of(req)
     segments = _SegmentTable(int(counts.sum()))
     segments.prepare(req.machine.tick_hz)
-    release_free_heap()  # the junctions' transients
+    large = len(segments) >= TRIM_SEGMENTS  # where handing free memory back is worth its page faults
+    if large:
+        release_free_heap()  # what building the spans, the junctions and the alignment's compile left
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
     while first < n:
         reach = np.cumsum(counts[first:])
@@ -361,9 +363,9 @@ def plan_topp(req: PlanRequest) -> Plan:
         x_start = float(out["x_node"][commit])
         first = int(grid.span[commit]) if commit < m else n
         window = WINDOW_INTERVALS
-        grid = out = None
-        release_free_heap()  # this window's working memory, for the next one
-    del facts, counts  # (n,) arrays the alignment's transients need more than they do
+    del facts, counts, grid, out  # (n,) arrays and the last window's: dead before the alignment
+    if large:
+        release_free_heap()  # the windows' working memory, in pieces too small for the alignment's arrays
     return segments.plan(req.machine.tick_hz)
 
 
@@ -426,6 +428,12 @@ def _solve_refined(
     raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
 
 
+#: Plans of at least this many segments hand the C heap's free pages back before the windows and before the
+#: tick alignment (:func:`~jaxcnc.planners.grid.release_free_heap`; 1 M blocks exact: 1251 -> 1085 MB peak at
+#: no measurable CPU). Smaller plans do not: the page faults of memory used again cost ~40 % of the CPU of a
+#: 100k-block plan. Nor does each window: 966 MB at 1 M blocks, but +25 % CPU (every 4th: 1057 MB, +7 %).
+TRIM_SEGMENTS = 1 << 20
+
 #: Buckets whose tick alignment this process has compiled (see :meth:`_SegmentTable.prepare`).
 _ALIGN_COMPILED: set[int] = set()
 
@@ -436,7 +444,9 @@ class _SegmentTable:
     ``capacity`` rows are allocated up front (the grid's interval count: every interval is a segment), so
     the windows' outputs are freed window by window instead of being kept as pieces and joined at the end;
     refinement that cuts more intervals grows the arrays. :meth:`plan` aligns them to ticks over the
-    whole program; the plan keeps views of the first ``n`` rows.
+    whole program; the plan keeps views of the first ``n`` rows. A segment ends at the speed the next one
+    starts at (the same node), so ``v1`` is a view of the ``v0`` column shifted by one — kept apart only if
+    some window's values ever differ in a bit.
     """
 
     _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {"rest": True, "length": 0.0, "span": 0, "s_start": 0.0}
@@ -444,36 +454,58 @@ class _SegmentTable:
 
     def __init__(self, capacity: int) -> None:
         self.n = 0
-        self.cols = {k: np.empty(bucket_size(capacity), self._DTYPES.get(k, np.float64)) for k in self._FILL}
+        rows = bucket_size(capacity)
+        self.cols = {k: np.empty(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in self._FILL if k != "v1"}
+        self.v1: np.ndarray | None = None  # None: v1[k] is v0[k + 1]
+
+    def __len__(self) -> int:
+        """Rows allocated (at least the segments expected)."""
+        return int(self.cols["t_acc"].shape[0])
 
     def prepare(self, tick_hz: float) -> None:
         """Compile the tick alignment for the bucket the plan will most likely have, now, while little memory
         is in use: compiled at the end, the compiler's working memory would sit on top of the whole plan's.
         Once per bucket and process (a run on zeros, discarded)."""
-        mb = next(iter(self.cols.values())).shape[0]
+        mb = self.cols["t_acc"].shape[0]
         if mb not in _ALIGN_COMPILED:
             zero = np.zeros(mb)
             _align({"t_acc": zero, "t_cru": zero, "t_dec": zero}, np.ones(mb, bool), tick_hz)
             _ALIGN_COMPILED.add(mb)
 
     def _reserve(self, rows: int) -> None:
-        have = next(iter(self.cols.values())).shape[0]
+        have = self.cols["t_acc"].shape[0]
         if rows > have:
             grown = bucket_size(max(rows, have + have // 4))
             for k, a in self.cols.items():
-                self.cols[k] = np.empty(grown, a.dtype)
-                self.cols[k][: self.n] = a[: self.n]
+                extra = int(k == "v0")
+                self.cols[k] = np.empty(grown + extra, a.dtype)
+                self.cols[k][: self.n + extra] = a[: self.n + extra]
+            if self.v1 is not None:
+                v1, self.v1 = self.v1, np.empty(grown)
+                self.v1[: self.n] = v1[: self.n]
 
     def append(self, out: dict[str, np.ndarray], grid: Grid, commit: int) -> None:
         """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
         self._reserve(self.n + commit)
-        rows = slice(self.n, self.n + commit)
+        n, cols = self.n, self.cols
+        rows = slice(n, n + commit)
+        v0, v1 = out["v0"][:commit], out["v1"][:commit]
+        if self.v1 is None and not (
+            _same_bits(v1[:-1], v0[1:]) and (n == 0 or _same_bits(cols["v0"][n : n + 1], v0[:1]))
+        ):
+            self.v1 = np.empty(cols["t_acc"].shape[0])  # (never seen: the nodes are shared)
+            self.v1[:n] = cols["v0"][1 : n + 1]
         for k in _SEGMENT_KEYS:
-            self.cols[k][rows] = out[k][:commit]
-        self.cols["rest"][rows] = out["x_node"][:commit] == 0.0
-        self.cols["length"][rows] = grid.delta[:commit]
-        self.cols["span"][rows] = grid.span[:commit]
-        self.cols["s_start"][rows] = grid.s_start[:commit]
+            if k != "v1":
+                cols[k][rows] = out[k][:commit]
+        if self.v1 is None:
+            cols["v0"][n + commit] = v1[-1]
+        else:
+            self.v1[rows] = v1
+        cols["rest"][rows] = out["x_node"][:commit] == 0.0
+        cols["length"][rows] = grid.delta[:commit]
+        cols["span"][rows] = grid.span[:commit]
+        cols["s_start"][rows] = grid.s_start[:commit]
         self.n += commit
 
     def plan(self, tick_hz: float) -> Plan:
@@ -484,13 +516,19 @@ class _SegmentTable:
         mb = bucket_size(n)
         self._reserve(mb)
         cols = self.cols
-        for k, fill in self._FILL.items():
-            cols[k][n:mb] = fill
+        for k in ("t_acc", "t_cru", "t_dec", "rest"):
+            cols[k][n:mb] = self._FILL[k]
         times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
         out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
         del times
-        out.update({k: cols[k][:n] for k in _SEGMENT_KEYS})
+        out.update({k: cols[k][:n] for k in _SEGMENT_KEYS if k != "v1"})
+        out["v1"] = cols["v0"][1 : n + 1] if self.v1 is None else self.v1[:n]
         return plan_from_outputs(out, cols["length"][:n], cols["span"][:n], cols["s_start"][:n], tick_hz)
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """``a`` and ``b`` (float64) hold the same bits (``-0.0`` is not ``0.0``)."""
+    return np.array_equal(a.view(np.int64), b.view(np.int64))
 
 
 def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
