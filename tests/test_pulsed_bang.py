@@ -175,3 +175,11 @@ def test_candidates_admissible_ascending_and_near_the_plan():
     near = near_candidates(c[:, 0], prev, w)
     assert np.all(np.diff(near, axis=1) >= 0) and np.all(admissible(near))
     assert np.all(near[:, 0] == c[:, 0]) and np.all(near[:, -1] == prev)
+
+
+def test_bang_is_the_default_and_a_jerk_machine_gets_sync():
+    from jaxcnc.planners.pulsed import DEFAULT_PULSE_PLANNER
+
+    pts = program_points(8, 200)
+    assert DEFAULT_PULSE_PLANNER == "bang"
+    assert plan_points(job(pts, "p"), GLASS).plan.planner == "bang"

@@ -2,12 +2,15 @@
 
 Every point is burned by exactly one laser pulse, at whose tick the beam is on the point; every
 interval between consecutive pulses lies in the lamp's window (:mod:`.windows`); idle pulses keep
-the lamp in its window where the motion needs longer. Three planners share one interface
+the lamp in its window where the motion needs longer. The planners share one interface
 (:class:`~.request.PulseRequest` → :class:`~.request.PulsePlan`):
 
 - ``stop-and-go`` — the old scheme: rest at every point, wait for the free-running pulse;
 - ``seed`` — the source documents' per-block look-ahead adjusted to pulse windows;
-- ``sync`` (default) — the whole job at once: one spline through the points at pulse instants.
+- ``sync`` — the whole job at once: one spline through the points at pulse instants;
+- ``bang`` (default) — constant-acceleration pieces between pulses, durations by greedy sweeps (shorter than
+  ``sync`` on every measured job; a machine with ``j_max`` or a galvo head is planned with ``sync``); ``best``
+  plans both.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from jaxcnc.planners.pulsed.request import (
 from jaxcnc.planners.pulsed.windows import PulseWindow, pulse_window
 from jaxcnc.program import PROGRAM_AXES, PointJob, program_start
 
-DEFAULT_PULSE_PLANNER = "sync"
+DEFAULT_PULSE_PLANNER = "bang"
 
 __all__ = [
     "DEFAULT_PULSE_PLANNER",
@@ -116,6 +119,7 @@ def pulse_request(job: PointJob, machine: MachineConfig) -> PulseRequest:
         rapid_mm_s=with_margin(machine.path.rapid),
         line=job.line,
         file=job.file,
+        smooth=machine.galvo is not None,
     )
 
 

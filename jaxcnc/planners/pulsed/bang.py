@@ -509,8 +509,8 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     w, f = req.window, req.tick_hz
     pts = req.points
     n = len(pts)
-    if n < 2 or np.any(np.isfinite(req.j_max)):
-        return plan_sync(req)  # acceleration steps at the knots need an unlimited jerk
+    if n < 2 or np.any(np.isfinite(req.j_max)) or req.smooth:
+        return plan_sync(req)  # acceleration steps at the knots need an unlimited jerk (and no galvo lag model)
     A = np.asarray(req.a_max, dtype=np.float64)
     V = np.asarray(req.v_max, dtype=np.float64)
     D = np.diff(pts, axis=0)

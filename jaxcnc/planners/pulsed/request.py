@@ -33,6 +33,8 @@ class PulseRequest:
         rapid_mm_s: cap on the path speed of the approach from ``home`` (the same).
         line: ``(n,)`` source line of each point, for error messages.
         file: the source.
+        smooth: the motion must keep a continuous acceleration (a galvo head's lag compensation, ``[galvo]``,
+            takes its second derivative), so planners whose accelerations step (``bang``) defer to ``sync``.
     """
 
     points: np.ndarray
@@ -45,6 +47,7 @@ class PulseRequest:
     rapid_mm_s: float
     line: np.ndarray
     file: str
+    smooth: bool = False
 
     @property
     def tick_hz(self) -> float:

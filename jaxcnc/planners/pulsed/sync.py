@@ -1,4 +1,4 @@
-"""``sync`` (the default): the whole job planned at once, every point burned in motion on a pulse.
+"""``sync``: the whole job planned at once, every point burned in motion on a pulse.
 
 Unknowns: the number of ticks ``d_i`` between the pulses that burn points ``i`` and ``i+1``.
 Given them, the motion is the C² spline through the points at their pulse instants
