@@ -673,7 +673,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--planner",
         help="velocity planner by name (default: [machine] planner, else topp): for contours topp (time-optimal, "
         "per-axis limits coupled exactly), lookahead (junction look-ahead), toppra, casadi; for pulsed point jobs "
-        "sync (default), seed (the source documents' per-block method), stop-and-go; or a plug-in's name "
+        "bang (default; sync where the machine sets j_max or has a galvo head), sync, best, seed (the source "
+        "documents' per-block method), stop-and-go; or a plug-in's name "
         "(entry-point groups jaxcnc.planners, jaxcnc.pulse_planners)",
     )
     sp.add_argument(
