@@ -39,6 +39,7 @@ up to there and the next starts from that node — the same plan as the whole pr
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -161,23 +162,34 @@ def static_cap(gu: list, gx: list, h: list, cap_a: jnp.ndarray) -> jnp.ndarray:
     return jnp.maximum(best, 0.0)
 
 
-def _bands(gu: list, gx: list, h: list) -> list[tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray, jnp.ndarray]]:
+class Band(NamedTuple):
+    """One axis and end of :func:`constraint_rows` without a box (each field ``(m,)``); see :func:`_bands`."""
+
+    active: jnp.ndarray  # |T| > GU_EPS: the rows bound u
+    t: jnp.ndarray  # T with the sign of the band's first row
+    t_abs: jnp.ndarray  # |T| where active, else 1
+    r: jnp.ndarray  # K/T
+    w: jnp.ndarray  # A/|T|
+    a: jnp.ndarray  # A
+    k: jnp.ndarray  # K with the sign of the band's first row
+
+
+def _bands(gu: list, gx: list, h: list) -> list[Band]:
     """The axis rows of :func:`constraint_rows` without a box as *bands*, one per axis and end.
 
     Without a box an axis' four rows are ``±(T u + K x) ≤ A`` at the start and at the end: the same ``T``,
     ``K`` with both signs, i.e. ``|T u + K x| ≤ A``, the band ``u ∈ [-w - r x, w - r x]`` with ``r = K/T``
-    and ``w = A/|T|`` where ``|T| > GU_EPS``. Returns ``(active, r, w, A, K)`` per band (lists of ``(m,)``).
-    ``r`` and ``w`` are computed with exactly the operations the row-pair forms use (``(-K)/(-T)`` is
-    ``K/T`` in floating point, ``-A/(-|T|)`` is ``A/|T|``), so the band forms below give the same bits
-    (compiled, a pass may still contract a multiply-add differently: the plan agrees to the last bit or so).
+    and ``w = A/|T|`` where ``|T| > GU_EPS``. ``r`` and ``w`` are computed with exactly the operations the
+    row-pair forms use (``(-K)/(-T)`` is ``K/T`` in floating point, ``-A/(-|T|)`` is ``A/|T|``), so the band
+    forms below give the same bits (compiled, a pass may still contract a multiply-add differently: the plan
+    agrees to the last bit or so).
     """
     bands = []
     for i in range(0, len(gu) - 2, 4):
         for t, k, a in ((gu[i], gx[i], h[i]), (gu[i + 1], gx[i + 1], h[i + 1])):
             active = jnp.abs(t) > GU_EPS
             t_abs = jnp.where(active, jnp.abs(t), 1.0)
-            r = k / jnp.where(active, t, 1.0)
-            bands.append((active, r, a / t_abs, a, k))
+            bands.append(Band(active, t, t_abs, k / jnp.where(active, t, 1.0), a / t_abs, a, k))
     return bands
 
 
@@ -192,23 +204,22 @@ def static_cap_bands(gu: list, gx: list, h: list, cap_a: jnp.ndarray) -> jnp.nda
     """
     bands = _bands(gu, gx, h)
     best = cap_a
-    for active, _, _, a_lim, k in bands:  # |T| ≤ GU_EPS: the rows bound x alone, |K| x ≤ A
-        flat = ~active & (jnp.abs(k) > 0)
-        best = jnp.minimum(best, jnp.where(flat, a_lim / jnp.where(flat, jnp.abs(k), 1.0), jnp.inf))
+    for b in bands:  # |T| ≤ GU_EPS: the rows bound x alone, |K| x ≤ A
+        flat = ~b.active & (jnp.abs(b.k) > 0)
+        best = jnp.minimum(best, jnp.where(flat, b.a / jnp.where(flat, jnp.abs(b.k), 1.0), jnp.inf))
     for p in range(len(bands)):
-        ap, rp, wp, _, _ = bands[p]
-        for q in range(p + 1, len(bands)):
-            aq, rq, wq, _, _ = bands[q]
-            coef = jnp.abs(rp - rq)
-            ok = ap & aq & (coef > 0)
-            best = jnp.minimum(best, jnp.where(ok, (wp + wq) / jnp.where(ok, coef, 1.0), jnp.inf))
+        bp = bands[p]
+        for bq in bands[p + 1 :]:
+            coef = jnp.abs(bp.r - bq.r)
+            ok = bp.active & bq.active & (coef > 0)
+            best = jnp.minimum(best, jnp.where(ok, (bp.w + bq.w) / jnp.where(ok, coef, 1.0), jnp.inf))
     two_d = -gu[-1]  # the row x_b ≥ 0 is (-2Δ) u + (-1) x ≤ 0
     z_on = two_d > GU_EPS
     r_z = gx[-1] / jnp.where(z_on, gu[-1], 1.0)
-    for active, rp, wp, _, _ in bands:
-        coef = rp - r_z
-        ok = active & z_on & (coef > 0)
-        best = jnp.minimum(best, jnp.where(ok, wp / jnp.where(ok, coef, 1.0), jnp.inf))
+    for b in bands:
+        coef = b.r - r_z
+        ok = b.active & z_on & (coef > 0)
+        best = jnp.minimum(best, jnp.where(ok, b.w / jnp.where(ok, coef, 1.0), jnp.inf))
     return jnp.maximum(best, 0.0)
 
 
@@ -248,12 +259,11 @@ def backward_pieces_bands(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tu
     """:func:`backward_pieces` of rows without a box: one piece per band (its lower row), the same step."""
     inv = jnp.where(delta > 0, 0.5 / jnp.where(delta > 0, delta, 1.0), 0.0)
     alpha, beta = [], []
-    for active, r, _, a_lim, _ in _bands(gu, gx, h):
-        t_abs = jnp.abs(_band_t(gu, len(alpha)))
-        coef = inv - jnp.where(active, r, 0.0)
-        use = active & (coef > 0) & (inv > 0)
+    for b in _bands(gu, gx, h):
+        coef = inv - jnp.where(b.active, b.r, 0.0)
+        use = b.active & (coef > 0) & (inv > 0)
         alpha.append(jnp.where(use, inv / jnp.where(use, coef, 1.0), 0.0))
-        beta.append(jnp.where(use, a_lim / jnp.where(use, t_abs * coef, 1.0), jnp.inf))
+        beta.append(jnp.where(use, b.a / jnp.where(use, b.t_abs * coef, 1.0), jnp.inf))
     return alpha, beta
 
 
@@ -261,18 +271,12 @@ def forward_pieces_bands(gu: list, gx: list, h: list, delta: jnp.ndarray) -> tup
     """:func:`forward_pieces` of rows without a box: one piece per band (its upper row) and the row
     ``x_b ≤ cap_b``, the same step."""
     a_list, b_list = [], []
-    for i, (active, _, _, a_lim, k) in enumerate(_bands(gu, gx, h)):
-        t = _band_t(gu, i)
-        inv = jnp.where(active, 2.0 * delta / jnp.where(active, jnp.abs(t), 1.0), 0.0)
-        a_list.append(jnp.where(active, 1.0 - jnp.where(t > 0, k, -k) * inv, 0.0))
-        b_list.append(jnp.where(active, a_lim * inv, jnp.inf))
+    for b in _bands(gu, gx, h):
+        inv = jnp.where(b.active, 2.0 * delta / b.t_abs, 0.0)
+        a_list.append(jnp.where(b.active, 1.0 - jnp.where(b.t > 0, b.k, -b.k) * inv, 0.0))
+        b_list.append(jnp.where(b.active, b.a * inv, jnp.inf))
     a_cap, b_cap = forward_pieces(gu[-2:-1], gx[-2:-1], h[-2:-1], delta)
     return a_list + a_cap, b_list + b_cap
-
-
-def _band_t(gu: list, band: int) -> jnp.ndarray:
-    """``T`` of band ``band`` (axis ``band // 2``, end ``band % 2``): its row with the sign as built."""
-    return gu[4 * (band // 2) + band % 2]
 
 
 def backward_scan(
@@ -432,7 +436,6 @@ def solve_chunked(
     x_end: jnp.ndarray,
     x_start: jnp.ndarray | float = 0.0,
     tail: Callable[[dict, jnp.ndarray], dict] | None = None,
-    bands: bool = False,
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray, dict]:
     """:func:`solve_window` (curved) over ``n_chunks`` chunks of ``C`` intervals, rows built chunk by chunk.
 
@@ -443,16 +446,16 @@ def solve_chunked(
     ``i`` (a traced index), each ``(C,)``; it is called once per pass, so it should be cheap elementwise
     work. ``tail(chunk, nodes)``: per-chunk outputs ``(C,)`` from the chunk's dict and its ``C + 1``
     node values of ``x``, gathered into ``(n_chunks · C,)`` vectors. Returns ``(x, exact, k0, tail_out)``
-    as :func:`solve_window` does, ``tail_out`` ``{}`` without ``tail``. ``bands``: as :func:`solve_window`'s.
+    as :func:`solve_window` does, ``tail_out`` ``{}`` without ``tail``. Row-pair forms: windows without
+    boxes go through :func:`window_pieces` and :func:`solve_pieces` instead.
     """
-    cap_fn, back_fn, fwd_fn = _forms(bands)
 
     def back(k_next, i):
         c = chunk_rows(i)
         gu, gx, h = c["rows"]
         cap_b = h[-2]
-        x_static = cap_fn(gu, gx, h, c["cap_a"])
-        alpha, beta = back_fn(gu, gx, h, c["delta"])
+        x_static = static_cap(gu, gx, h, c["cap_a"])
+        alpha, beta = backward_pieces(gu, gx, h, c["delta"])
         k_first, (k, exact) = jax.lax.scan(_backward_step_exact, k_next, (x_static, alpha, beta, cap_b), reverse=True)
         return k_first, (k, exact)
 
@@ -465,7 +468,7 @@ def solve_chunked(
         i, k_b = i_k
         c = chunk_rows(i)
         gu, gx, h = c["rows"]
-        a, b = fwd_fn(gu, gx, h, c["delta"])
+        a, b = forward_pieces(gu, gx, h, c["delta"])
         x_last, x = jax.lax.scan(_forward_step, x_a, (a, b, c["delta"], k_b))
         out = {} if tail is None else tail(c, jnp.concatenate([x_a[None], x]))
         return x_last, (x, out)
