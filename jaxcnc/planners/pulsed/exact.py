@@ -118,6 +118,36 @@ def _nlp(ca, pts, lo_s, hi_s, guess_s, v_max, a_max, steps, tol, feed=None, rapi
 POLYGON_SIDES = 16
 #: With three moving axes, the least-moving one's share of a path cap (the other two share the rest).
 Z_SHARE = 0.3
+#: A side's distance from the centre of the polygon inscribed in the unit circle.
+POLYGON_INSET = np.cos(np.pi / POLYGON_SIDES)
+
+
+def step_caps(n_steps: int, steps: int, feed_mm_s, rapid_mm_s, rest_ends: bool) -> np.ndarray:
+    """``(n_steps + 1,)`` the path-speed cap at each step end: the rapid everywhere, the feed at the pulses
+    (every ``steps``-th end), 0 at the window's ends when they are at rest; ``inf`` where none applies."""
+    caps = np.full(n_steps + 1, np.inf)
+    if rapid_mm_s is not None:
+        caps[:] = rapid_mm_s
+    if feed_mm_s is not None:
+        caps[::steps] = np.minimum(caps[::steps], feed_mm_s)
+    if rest_ends:
+        caps[[0, -1]] = 0.0
+    return caps
+
+
+def cap_polygon(travel: list[float]) -> tuple[list[int], np.ndarray, float]:
+    """How the speed cap is made linear for moving axes with ``travel`` ``(m,)`` (total distance each, m ≥ 2).
+
+    The two axes that move most share a polygon of :data:`POLYGON_SIDES` sides inscribed in the circle of
+    radius ``r`` × the cap; a third gets a box of :data:`Z_SHARE` × the cap, with ``r = sqrt(1 - Z_SHARE²)``,
+    so the speed stays within the ball. Returns ``(order, angles, r)``: the axes by travel (most first),
+    the polygon's side directions, and its circle's radius per unit cap (a side at ``r`` × :data:`POLYGON_INSET`).
+    """
+    m = len(travel)
+    order = sorted(range(m), key=lambda i: -travel[i])
+    r = 1.0 if m == 2 else np.sqrt(1.0 - Z_SHARE**2)
+    ang = np.arange(POLYGON_SIDES) * 2 * np.pi / POLYGON_SIDES
+    return order, ang, r
 
 
 def feasible_ticks(
@@ -159,13 +189,7 @@ def feasible_ticks(
     pos_a = coo_matrix((0.5 * tau * tau, (gap, j)), (g, n))
     A_eq = bmat([[dyn_v, dyn_a], [pos_v, pos_a]]).tocsr()
     moving = [k for k in range(pts.shape[1]) if np.any(np.diff(pts[:, k]) != 0)]
-    caps = np.full(n + 1, np.inf)  # the path cap at each step end
-    if rapid_mm_s is not None:
-        caps[:] = rapid_mm_s
-    if feed_mm_s is not None:
-        caps[::steps] = np.minimum(caps[::steps], feed_mm_s)
-    if rest_ends:
-        caps[[0, -1]] = 0.0
+    caps = step_caps(n, steps, feed_mm_s, rapid_mm_s, rest_ends)
     if not np.isfinite(caps).any() or len(moving) <= 1:
         for k in moving:
             D = np.diff(pts[:, k])
@@ -185,11 +209,7 @@ def feasible_ticks(
     m = len(moving)
     size = 2 * n + 1
     b_eq = np.concatenate([np.concatenate([np.zeros(n), np.diff(pts[:, k])]) for k in moving])
-    # the two axes that move most share a polygon of radius r (inside the circle); a third gets a box of
-    # Z_SHARE x the cap, r = sqrt(1 - Z_SHARE^2) x the cap, so the speed stays within the ball
-    order = sorted(range(m), key=lambda i: -np.abs(np.diff(pts[:, moving[i]])).sum())
-    r = 1.0 if m == 2 else np.sqrt(1.0 - Z_SHARE**2)
-    ang = np.arange(POLYGON_SIDES) * 2 * np.pi / POLYGON_SIDES
+    order, ang, r = cap_polygon([np.abs(np.diff(pts[:, k])).sum() for k in moving])
     zero = csr_matrix((n + 1, size))
     pick = [hstack([np.eye(n + 1), csr_matrix((n + 1, n))]) for _ in moving]
     rows = []
@@ -199,7 +219,7 @@ def feasible_ticks(
         rows.append(hstack(blocks))
     keep = np.tile(np.isfinite(caps), POLYGON_SIDES)
     A_ub = vstack(rows).tocsr()[keep]
-    b_ub = np.tile(caps * r * np.cos(np.pi / POLYGON_SIDES), POLYGON_SIDES)[keep]
+    b_ub = np.tile(caps * r * POLYGON_INSET, POLYGON_SIDES)[keep]
     box = [np.full(n + 1, np.inf)] * m
     if m == 3:
         box[order[2]] = caps * Z_SHARE

@@ -54,7 +54,15 @@ from scipy.optimize import linprog
 from scipy.sparse import coo_matrix, csr_matrix, diags, vstack
 
 from jaxcnc.errors import PlanningError
-from jaxcnc.planners.pulsed.exact import POLYGON_SIDES, STEPS_PER_GAP, Z_SHARE, feasible_ticks
+from jaxcnc.planners.pulsed.exact import (
+    POLYGON_INSET,
+    POLYGON_SIDES,
+    STEPS_PER_GAP,
+    Z_SHARE,
+    cap_polygon,
+    feasible_ticks,
+    step_caps,
+)
 from jaxcnc.planners.pulsed.windows import PulseWindow, snap_up_ticks
 
 #: Tangents of each gap's hyperbola per box (at geometrically spaced durations, both ends included).
@@ -140,28 +148,20 @@ class _Model:
         self.M_rows = [self._axis_block(i, csr_matrix(w)) for i in range(m)]
         zero = self.D == 0
         self.A_eq = vstack([self.M_rows[i][zero[:, i]] for i in range(m)]).tocsr() if zero.any() else None
-        caps = np.full(n + 1, np.inf)
-        if rapid_mm_s is not None:
-            caps[:] = rapid_mm_s
-        if feed_mm_s is not None:
-            caps[::steps] = np.minimum(caps[::steps], feed_mm_s)
-        if rest_ends:
-            caps[[0, -1]] = 0.0
+        caps = step_caps(n, steps, feed_mm_s, rapid_mm_s, rest_ends)
         self.bounds_v = []
         box = [np.full(n + 1, np.inf)] * m
         self.A_cap, self.b_cap = None, None
         if np.isfinite(caps).any() and m >= 2:
-            # the same polygon as feasible_ticks: the two axes that move most, a third in Z_SHARE of the cap
-            order = sorted(range(m), key=lambda i: -np.abs(self.D[:, i]).sum())
-            r = 1.0 if m == 2 else np.sqrt(1.0 - Z_SHARE**2)
-            ang = np.arange(POLYGON_SIDES) * 2 * np.pi / POLYGON_SIDES
+            # the same polygon as feasible_ticks
+            order, ang, r = cap_polygon([np.abs(self.D[:, i]).sum() for i in range(m)])
             keep = np.flatnonzero(np.isfinite(caps))
             eye = csr_matrix((np.ones(keep.size), (np.arange(keep.size), keep)), (keep.size, n + 1))
             blocks = [
                 np.cos(t) * self._axis_block(order[0], eye) + np.sin(t) * self._axis_block(order[1], eye) for t in ang
             ]
             self.A_cap = vstack(blocks).tocsr()
-            self.b_cap = np.tile(caps[keep] * r * np.cos(np.pi / POLYGON_SIDES), POLYGON_SIDES)
+            self.b_cap = np.tile(caps[keep] * r * POLYGON_INSET, POLYGON_SIDES)
             if m == 3:
                 box = list(box)
                 box[order[2]] = caps * Z_SHARE
