@@ -464,6 +464,31 @@ def _block_rows(table: TableFile, program: Program) -> tuple[np.ndarray, np.ndar
     return ev["tick"].astype(np.int64), rows
 
 
+def tool_rows_distance(table: TableFile, program: Program, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Each tick's program row (the last BLOCK event at or before it), the distance of the tool point ``p``
+    ``(n_rows, 3)`` mm from that row — or from the moving row before it, where a tick just past a joint may
+    still lie — and the first block's tick (before it the machine has not reached the program). ``None``
+    where the table's block events do not match the program (the caller records it)."""
+    ev = table.events[table.events["kind"] == EventKind.BLOCK]
+    rows_ev = ev["value"].astype(np.int64)
+    if ev.size == 0 or np.any(rows_ev >= len(program)) or np.any(rows_ev < 0):
+        return None
+    row = rows_ev[np.maximum(np.searchsorted(ev["tick"], np.arange(table.n_rows), side="right") - 1, 0)]
+    geo = ProgramPath(program, 0.0)
+    prev = np.where(geo.prev[row] >= 0, geo.prev[row], row)
+    return row, np.minimum(geo.distance(p, row), geo.distance(p, prev)), int(ev["tick"][0])
+
+
+def tool_point_violations(tool: np.ndarray, d: np.ndarray, row: np.ndarray, program: Program, tol: float) -> list[str]:
+    """One line for each of the first 20 ticks whose tool point ``tool`` ``(n_rows, 2)`` lies more than ``tol``
+    mm from its program row (``d``, ``row`` from :func:`tool_rows_distance`)."""
+    return [
+        f"tick {k}: tool point ({tool[k, 0]:.6g}, {tool[k, 1]:.6g}) is {d[k]:.3g} mm from line "
+        f"{program.line[row[k]]} (allowed {tol:.3g} mm)"
+        for k in np.flatnonzero(d > tol)[:20]
+    ]
+
+
 def path_deviation(
     table: TableFile,
     machine: MachineConfig,

@@ -32,7 +32,7 @@ from jaxcnc.format import EVENT_DTYPE, EventKind, TableFile
 from jaxcnc.format.vectors import VectorHeader, encode_rows
 from jaxcnc.machine import GalvoConfig, MachineConfig
 from jaxcnc.program import Event, Kind, Program, program_start
-from jaxcnc.ticks.deviation import ProgramPath
+from jaxcnc.ticks.deviation import tool_point_violations, tool_rows_distance
 
 #: Numeric slack on the tool-point distance (mm) beside the tolerance.
 SLACK_MM = 1e-6
@@ -234,26 +234,16 @@ def check_external(table: TableFile, machine: MachineConfig, program: Program) -
         out.violations.append(f"the stage moves {still:.3g} mm while the scanner runs")
     if centre > 0:
         out.violations.append(f"the beam leaves the field's centre by {centre:.3g} mm while the stage runs")
-    ev = table.events[table.events["kind"] == EventKind.BLOCK]
-    rows_ev = ev["value"].astype(np.int64)
-    if ev.size == 0 or np.any(rows_ev >= len(program)) or np.any(rows_ev < 0):
+    found = tool_rows_distance(table, program, np.c_[tool, z])
+    if found is None:
         out.violations.append("the table's block events do not match the program")
         return out
-    row = rows_ev[np.maximum(np.searchsorted(ev["tick"], np.arange(table.n_rows), side="right") - 1, 0)]
-    geo = ProgramPath(program, 0.0)
-    p3 = np.c_[tool, z]
-    d = geo.distance(p3, row)
-    prev = np.where(geo.prev[row] >= 0, geo.prev[row], row)
-    d = np.minimum(d, geo.distance(p3, prev))  # a tick just past a joint may still lie on the row before
-    lead = np.arange(table.n_rows) < ev["tick"][0]
+    row, d, first_tick = found
+    lead = np.arange(table.n_rows) < first_tick
     d[lead] = 0.0  # before the first row the machine stands at home, where the program starts
     out.max_tool_deviation_mm = float(d.max())
     tol = machine.path.corner_tol_mm + table.header.discrete_mm + SLACK_MM
-    for k in np.flatnonzero(d > tol)[:20]:
-        out.violations.append(
-            f"tick {k}: tool point ({tool[k, 0]:.6g}, {tool[k, 1]:.6g}) is {d[k]:.3g} mm from line "
-            f"{program.line[row[k]]} (allowed {tol:.3g} mm)"
-        )
+    out.violations += tool_point_violations(tool, d, row, program, tol)
     return out
 
 

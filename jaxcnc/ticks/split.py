@@ -82,7 +82,7 @@ class SplitCheck:
 
 def check_split(table: TableFile, machine: MachineConfig, program: Program) -> SplitCheck:
     """The scanner inside its field and the tool point within one discrete of the program at every tick."""
-    from jaxcnc.ticks.deviation import ProgramPath
+    from jaxcnc.ticks.deviation import segment_distance, tool_point_violations, tool_rows_distance
 
     axes = list(table.axes)
     u, v = machine.scanner.axes[:2]
@@ -97,23 +97,15 @@ def check_split(table: TableFile, machine: MachineConfig, program: Program) -> S
     bad = np.flatnonzero(use > 1.0 + 1e-9)
     for k in bad[:20]:
         out.violations.append(f"tick {k}: scanner at ({cmd[k, 0]:.4g}, {cmd[k, 1]:.4g}) mm, outside its field")
-    ev = table.events[table.events["kind"] == EventKind.BLOCK]
-    rows_ev = ev["value"].astype(np.int64)
-    if ev.size == 0 or np.any(rows_ev >= len(program)) or np.any(rows_ev < 0):
+    p3 = np.c_[tool, np.full(tool.shape[0], program.start[0, 2] if len(program) else 0.0)]
+    found = tool_rows_distance(table, program, p3)
+    if found is None:
         out.violations.append("the table's block events do not match the program")
         return out
-    row = rows_ev[np.maximum(np.searchsorted(ev["tick"], np.arange(table.n_rows), side="right") - 1, 0)]
-    geo = ProgramPath(program, 0.0)
-    p3 = np.c_[tool, np.full(tool.shape[0], program.start[0, 2] if len(program) else 0.0)]
-    d = geo.distance(p3, row)
-    # a tick where the tool has just entered a row may still lie on the row before (joints of rows)
-    prev = np.where(geo.prev[row] >= 0, geo.prev[row], row)
-    d = np.minimum(d, geo.distance(p3, prev))
+    row, d, first_tick = found
     # before the first row: the straight way from where the tool stands at home (calibration) to the start
-    lead = np.arange(table.n_rows) < ev["tick"][0]
+    lead = np.arange(table.n_rows) < first_tick
     if lead.any():
-        from jaxcnc.ticks.deviation import segment_distance
-
         home = program_start(machine)
         u_home = np.array([machine.axis(n).home for n in (u, v)])
         t_home = np.r_[home[:2] + offset + m_cal @ u_home, p3[0, 2]]
@@ -123,11 +115,7 @@ def check_split(table: TableFile, machine: MachineConfig, program: Program) -> S
         )
     out.max_tool_deviation_mm = float(d.max())
     tol = table.header.discrete_mm + SLACK_MM
-    for k in np.flatnonzero(d > tol)[:20]:
-        out.violations.append(
-            f"tick {k}: tool point ({tool[k, 0]:.6g}, {tool[k, 1]:.6g}) is {d[k]:.3g} mm from line "
-            f"{program.line[row[k]]} (allowed {tol:.3g} mm)"
-        )
+    out.violations += tool_point_violations(tool, d, row, program, tol)
     return out
 
 
