@@ -69,3 +69,33 @@ def test_importing_the_planning_stack_writes_nothing(tmp_path):
     env["JAXCNC_CACHE_DIR"] = str(tmp_path / "jax-cache")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-2000:]
+
+
+def test_planners_run_on_the_host_cpu_device():
+    """``plan_job`` runs the planner with the host CPU as JAX's default device (jaxconfig: the sequential
+    passes are latency-bound; on a GPU they took 30–40× the CPU's time), and the look-ahead pass picks its
+    sequential form there; outside, the default is left as it was."""
+    import jax
+
+    from jaxcnc.bench.plan import bench_machine
+    from jaxcnc.bench.programs import cam_polyline
+    from jaxcnc.jaxconfig import on_cpu, planning_device
+    from jaxcnc.machine import parse_machine
+    from jaxcnc.planners import Planner, get_planner, plan_job
+
+    seen = {}
+
+    class Recording(Planner):
+        name = "recording"
+
+        def plan(self, request):
+            seen["device"] = jax.config.jax_default_device
+            seen["on_cpu"] = on_cpu()
+            return get_planner("topp").plan(request)
+
+    assert planning_device().platform == "cpu"
+    before = jax.config.jax_default_device
+    job = plan_job(cam_polyline(30), parse_machine(bench_machine(0.01), "<test>"), Recording())
+    assert seen == {"device": planning_device(), "on_cpu": True}
+    assert jax.config.jax_default_device is before
+    assert job.plan.total_time_s > 0

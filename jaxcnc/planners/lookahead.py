@@ -18,7 +18,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc.jaxconfig import on_cpu  # (and float64)
 
 
 def _compose(first: tuple[jnp.ndarray, jnp.ndarray], second: tuple[jnp.ndarray, jnp.ndarray]):
@@ -34,7 +34,7 @@ def forward_pass(b: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
     same work in a fraction of the time (~2 ns a step, compiled in milliseconds where the associative
     scan takes a second to compile), so the backend decides.
     """
-    if jax.default_backend() != "cpu":
+    if not on_cpu():
         big, _ = jax.lax.associative_scan(_compose, (b, d))
         return big
 
