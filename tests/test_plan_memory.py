@@ -70,7 +70,7 @@ def test_segments_grown_from_a_small_table_plan_the_same(monkeypatch, corner_tol
     m = parse_machine(BENCH_MACHINE + f"corner_tol_mm = {corner_tol}\n", "<bench>")
     reference = plan_job(prog, m).plan
     init = topp._SegmentTable.__init__
-    monkeypatch.setattr(topp._SegmentTable, "__init__", lambda self, capacity: init(self, 1))
+    monkeypatch.setattr(topp._SegmentTable, "__init__", lambda self, capacity, *a: init(self, 1, *a))
     monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 10)  # several windows, each growing the arrays
     windowed = plan_job(prog, m).plan
     np.testing.assert_allclose(windowed.vp, reference.vp, rtol=0, atol=1e-9)
@@ -110,3 +110,44 @@ def test_segment_table_shares_v1_with_the_next_v0_only_where_their_bits_agree(sp
     assert np.array_equal(plan.v0.view(np.int64), np.r_[v0a, v0b].view(np.int64))
     assert np.array_equal(plan.v1.view(np.int64), np.r_[v1a, v1b].view(np.int64))
     assert np.shares_memory(plan.v0, plan.v1) == (split == "shared")
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+def test_where_segments_lie_is_derived_from_the_counts_and_equals_the_stored_columns(monkeypatch, corner_tol):
+    """The table does not store ``span``, ``s_start``, ``length`` when the windows' grids follow the counts (they
+    do, window after window); storing them, as it does from the first window that differs, plans the same."""
+    import jaxcnc.planners.topp as topp
+
+    prog = cam_polyline(3000)
+    m = parse_machine(BENCH_MACHINE + f"corner_tol_mm = {corner_tol}\n", "<bench>")
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 11)  # several windows
+    modes = []
+    plan = topp._SegmentTable.plan
+    monkeypatch.setattr(topp._SegmentTable, "plan", lambda self, hz: modes.append(self.derived) or plan(self, hz))
+    derived = plan_job(prog, m).plan
+    assert modes == [True]
+    derivable = topp._SegmentTable._derivable
+    calls = []
+
+    def second_window_differs(self, grid, commit):
+        calls.append(commit)
+        return len(calls) != 2 and derivable(self, grid, commit)
+
+    monkeypatch.setattr(topp._SegmentTable, "_derivable", second_window_differs)
+    stored = plan_job(prog, m).plan
+    assert modes == [True, False] and len(calls) == 2  # stored from the second window on
+    _same_plan(stored, derived)
+    monkeypatch.setattr(topp._SegmentTable, "_derivable", lambda self, grid, commit: False)
+    _same_plan(plan_job(prog, m).plan, derived)  # stored from the first window
+
+
+def test_grid_rows_are_the_grids_rows_in_any_block_of_spans():
+    from jaxcnc.planners.grid import build_grid, interval_counts
+    from jaxcnc.planners.topp import _grid_rows
+
+    spans = build_spans(cam_polyline(500), 0.01)
+    counts = interval_counts(spans) * np.random.default_rng(3).integers(1, 5, len(spans))
+    grid = build_grid(spans, counts)
+    parts = [_grid_rows(spans.length, counts, a, b) for a, b in ((0, 17), (17, 18), (18, 260), (260, len(spans)))]
+    for whole, piece in zip((grid.span, grid.s_start, grid.delta), zip(*parts, strict=True), strict=True):
+        assert np.array_equal(np.concatenate(piece).view(np.int64), whole.view(np.int64))

@@ -338,7 +338,7 @@ def plan_topp(req: PlanRequest) -> Plan:
     n = len(spans)
     counts = hold_counts(req, interval_counts(spans))
     facts = _ProgramFacts.of(req)
-    segments = _SegmentTable(int(counts.sum()))
+    segments = _SegmentTable(int(counts.sum()), spans.length, counts)  # counts: refined in place
     segments.prepare(req.machine.tick_hz)
     large = len(segments) >= TRIM_SEGMENTS  # where handing free memory back is worth its page faults
     if large:
@@ -357,13 +357,15 @@ def plan_topp(req: PlanRequest) -> Plan:
             enough = out["k0"] >= x_start * (1.0 - 1e-9) - 1e-9  # the window can stop from x_start
             if not (enough and starts.size):
                 window *= 2  # no node of this window is settled yet: look further ahead
+                del grid, out
                 continue
             commit = int(starts[-1])
         segments.append(out, grid, commit)
         x_start = float(out["x_node"][commit])
         first = int(grid.span[commit]) if commit < m else n
         window = WINDOW_INTERVALS
-    del facts, counts, grid, out  # (n,) arrays and the last window's: dead before the alignment
+        del grid, out  # freed before the next window's are made, not after
+    del facts  # (n,) arrays: dead before the alignment
     if large:
         release_free_heap()  # the windows' working memory, in pieces too small for the alignment's arrays
     return segments.plan(req.machine.tick_hz)
@@ -444,18 +446,30 @@ class _SegmentTable:
     ``capacity`` rows are allocated up front (the grid's interval count: every interval is a segment), so
     the windows' outputs are freed window by window instead of being kept as pieces and joined at the end;
     refinement that cuts more intervals grows the arrays. :meth:`plan` aligns them to ticks over the
-    whole program; the plan keeps views of the first ``n`` rows. A segment ends at the speed the next one
-    starts at (the same node), so ``v1`` is a view of the ``v0`` column shifted by one — kept apart only if
-    some window's values ever differ in a bit.
+    whole program; the plan keeps views of the first ``n`` rows. Two columns and three are not stored while
+    they can be derived, bit for bit, from what is kept anyway (checked on every window):
+
+    * a segment ends at the speed the next one starts at (the same node), so ``v1`` is a view of the ``v0``
+      column shifted by one — kept apart only if some window's values ever differ in a bit;
+    * where a segment lies (``span``, ``s_start``, ``length``) follows from the spans' lengths and the
+      final ``counts`` (the windows cut span ``k`` into ``counts[k]`` equal intervals, :func:`_grid_rows`), so
+      given ``span_length`` and ``counts`` (the array refinement updates in place) those three columns are
+      made by :meth:`plan` — 48 MB less at the peak of a 2 M-segment plan — and stored only from the first
+      window whose grid differs in a bit (never seen).
     """
 
     _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {"rest": True, "length": 0.0, "span": 0, "s_start": 0.0}
     _DTYPES = {"rest": np.bool_, "span": np.int64}
+    _WHERE = ("length", "span", "s_start")
 
-    def __init__(self, capacity: int) -> None:
+    def __init__(self, capacity: int, span_length: np.ndarray | None = None, counts: np.ndarray | None = None) -> None:
         self.n = 0
         rows = bucket_size(capacity)
-        self.cols = {k: np.empty(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in self._FILL if k != "v1"}
+        self.span_length, self.counts = span_length, counts
+        self.derived = counts is not None  # where the segments lie: derived from counts (True) or stored
+        self.next_span = 0  # the first span no committed segment covers yet
+        keep = [k for k in self._FILL if k != "v1" and not (self.derived and k in self._WHERE)]
+        self.cols = {k: np.empty(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
         self.v1: np.ndarray | None = None  # None: v1[k] is v0[k + 1]
 
     def __len__(self) -> int:
@@ -484,8 +498,47 @@ class _SegmentTable:
                 v1, self.v1 = self.v1, np.empty(grown)
                 self.v1[: self.n] = v1[: self.n]
 
+    def _derivable(self, grid: Grid, commit: int) -> bool:
+        """The window's first ``commit`` grid rows are :func:`_grid_rows` of the spans they cover, bit for bit."""
+        if not commit or int(grid.span[0]) != self.next_span or int(grid.span[commit - 1]) < self.next_span:
+            return False
+        last = int(grid.span[commit - 1]) + 1
+        if int(self.counts[self.next_span : last].sum()) != commit:
+            return False
+        span, s_start, length = _grid_rows(self.span_length, self.counts, self.next_span, last)
+        return (
+            np.array_equal(span, grid.span[:commit])
+            and _same_bits(s_start, grid.s_start[:commit])
+            and _same_bits(length, grid.delta[:commit])
+        )
+
+    def _store_where(self) -> None:
+        """From now on store where the segments lie; the rows so far are derived from the counts."""
+        rows = self.cols["t_acc"].shape[0]
+        for k, a in zip(self._WHERE, self._where(self.n), strict=True):
+            self.cols[k] = np.empty(rows, self._DTYPES.get(k, np.float64))
+            self.cols[k][: self.n] = a
+        self.derived = False
+
+    def _where(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``length, span, s_start`` of the first ``n`` segments (derived mode), made span block by span block
+        into arrays of ``n`` rows (the temporaries stay small)."""
+        length, span, s_start = np.empty(n), np.empty(n, np.int64), np.empty(n)
+        ends = np.cumsum(self.counts[: self.next_span])
+        row, first = 0, 0
+        while first < self.next_span:
+            last = min(self.next_span, first + _WHERE_BLOCK)
+            k = int(ends[last - 1]) - row
+            span[row : row + k], s_start[row : row + k], length[row : row + k] = _grid_rows(
+                self.span_length, self.counts, first, last
+            )
+            row, first = row + k, last
+        return length[:n], span[:n], s_start[:n]
+
     def append(self, out: dict[str, np.ndarray], grid: Grid, commit: int) -> None:
         """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
+        if self.derived and not self._derivable(grid, commit):
+            self._store_where()  # (never seen: the windows cut the spans as the counts say)
         self._reserve(self.n + commit)
         n, cols = self.n, self.cols
         rows = slice(n, n + commit)
@@ -503,9 +556,12 @@ class _SegmentTable:
         else:
             self.v1[rows] = v1
         cols["rest"][rows] = out["x_node"][:commit] == 0.0
-        cols["length"][rows] = grid.delta[:commit]
-        cols["span"][rows] = grid.span[:commit]
-        cols["s_start"][rows] = grid.s_start[:commit]
+        if not self.derived:
+            cols["length"][rows] = grid.delta[:commit]
+            cols["span"][rows] = grid.span[:commit]
+            cols["s_start"][rows] = grid.s_start[:commit]
+        if commit:
+            self.next_span = int(grid.span[commit - 1]) + 1
         self.n += commit
 
     def plan(self, tick_hz: float) -> Plan:
@@ -523,7 +579,26 @@ class _SegmentTable:
         del times
         out.update({k: cols[k][:n] for k in _SEGMENT_KEYS if k != "v1"})
         out["v1"] = cols["v0"][1 : n + 1] if self.v1 is None else self.v1[:n]
-        return plan_from_outputs(out, cols["length"][:n], cols["span"][:n], cols["s_start"][:n], tick_hz)
+        length, span, s_start = self._where(n) if self.derived else (cols[k][:n] for k in self._WHERE)
+        return plan_from_outputs(out, length, span, s_start, tick_hz)
+
+
+#: Spans per block when :meth:`_SegmentTable.plan` makes where the segments lie.
+_WHERE_BLOCK = 1 << 16
+
+
+def _grid_rows(span_length: np.ndarray, counts: np.ndarray, first: int, last: int) -> tuple[np.ndarray, ...]:
+    """``(span, s_start, delta)`` of spans ``first..last-1`` cut into ``counts[k]`` equal intervals each: the
+    arithmetic of :func:`~jaxcnc.planners.grid.build_grid` (elementwise, so any block of spans gives the same
+    bits; :meth:`_SegmentTable.append` checks every window against it)."""
+    counts = counts[first:last]
+    span = np.repeat(np.arange(first, last), counts)
+    j = np.arange(span.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    local = span - first
+    step = span_length[first:last] / counts
+    s_start = j * step[local]
+    s_end = np.where(j == counts[local] - 1, span_length[span], (j + 1) * step[local])
+    return span, s_start, s_end - s_start
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
