@@ -365,6 +365,8 @@ def plan_topp(req: PlanRequest) -> Plan:
         first = int(grid.span[commit]) if commit < m else n
         window = WINDOW_INTERVALS
         del grid, out  # freed before the next window's are made, not after
+        if large and segments.n == commit:
+            release_free_heap()  # the first window's working memory and its programs' compile (a first call)
     del facts  # (n,) arrays: dead before the alignment
     if large:
         release_free_heap()  # the windows' working memory, in pieces too small for the alignment's arrays
@@ -430,10 +432,13 @@ def _solve_refined(
     raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
 
 
-#: Plans of at least this many segments hand the C heap's free pages back before the windows and before the
-#: tick alignment (:func:`~jaxcnc.planners.grid.release_free_heap`; 1 M blocks exact: 1251 -> 1085 MB peak at
-#: no measurable CPU). Smaller plans do not: the page faults of memory used again cost ~40 % of the CPU of a
-#: 100k-block plan. Nor does each window: 966 MB at 1 M blocks, but +25 % CPU (every 4th: 1057 MB, +7 %).
+#: Plans of at least this many segments hand the C heap's free pages back before the windows, after the first
+#: window (its working memory and, in a first call, its programs' compile: 1 M blocks exact 1000 -> 962-974 MB
+#: peak) and before the tick alignment (:func:`~jaxcnc.planners.grid.release_free_heap`; 1 M blocks exact:
+#: 1251 -> 1085 MB peak at no measurable CPU). Smaller plans do not: the page faults of memory used again cost
+#: ~40 % of the CPU of a 100k-block plan. Nor does each window: 966 MB at 1 M blocks, but +25 % CPU (every 4th:
+#: 1057 MB, +7 %). Fixing glibc's mmap threshold instead (``mallopt``, so that large arrays are unmapped when
+#: freed) costs more: 962-991 MB but +60-130 % CPU at 1 M blocks exact (1.1 M page faults a plan at 128 KiB).
 TRIM_SEGMENTS = 1 << 20
 
 #: Buckets whose tick alignment this process has compiled (see :meth:`_SegmentTable.prepare`).
