@@ -18,7 +18,7 @@ degree-elevated quartic ``C - ℓ t1, C - ℓ/2 t1, C, C + ℓ/2 t2, C + ℓ t2`
 symmetry it comes closest to ``C`` at its middle, ``B(½) = C + 3ℓ (t2 - t1) / 16``: the path moves
 at most ``(3/8) ℓ sin(θ/2)`` from the corner, so ``ℓ = 8 tol / (3 sin(θ/2))`` keeps the deviation
 within ``tol``. Where an arc takes part the same ``ℓ`` is a first guess: the distance to the two
-replaced pieces is measured at 33 points of the blend (plus a bound of the curvature between
+replaced pieces is measured at 17 points of the blend (plus a bound of the curvature between
 them) and ``ℓ`` shrinks until it is within ``tol``. ``ℓ`` never exceeds half of either span, so
 neighbouring blends never overlap (a short line between two blends may be consumed entirely).
 
@@ -35,14 +35,12 @@ tangentially by the programs that write them).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from jaxcnc.buckets import bucket_size
+from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.geometry import poly
 from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
-from jaxcnc.geometry.blend_kernel import blend_kernel
+from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
@@ -52,8 +50,6 @@ BLEND_DEGREE = 5
 #: Turns below this are rounding (tangent continuity already); above the limit the motion stops.
 MIN_TURN_RAD = 1e-9
 MAX_TURN_RAD = np.deg2rad(150.0)
-#: Points of a blend where its distance to the replaced path is measured.
-N_DEVIATION = 17
 #: Rounds of shrinking a blend whose measured deviation exceeds the tolerance.
 SHRINK_ROUNDS = 8
 #: Rounds of giving up a chain curvature where a blend would leave the tolerance.
@@ -82,66 +78,25 @@ def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) ->
     return np.where(ok, tol, 0.0)
 
 
-def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance from points ``p`` ``(J, Q, 3)`` to segments ``a``–``b`` ``(J, 3)``."""
-    ab = b - a
-    den = np.maximum(np.sum(ab * ab, axis=1), 1e-300)[:, None]
-    t = np.clip(np.sum((p - a[:, None]) * ab[:, None], axis=2) / den, 0.0, 1.0)
-    return np.linalg.norm(p - (a[:, None] + t[..., None] * ab[:, None]), axis=2)
-
-
-@dataclass(frozen=True)
-class _Pieces:
-    """The parts ``[s_lo, s_hi]`` of ``J`` lines and arcs, ready for many distance queries.
-
-    ``a``, ``b``: ``(J, 3)`` their ends; ``arc``: indices (into ``J``) of the arcs, with their centre,
-    in-plane unit vectors, axis, radius, rise per radian and the part's angles ``lo``, ``hi``.
-    """
-
-    a: np.ndarray
-    b: np.ndarray
-    arc: np.ndarray
-    center: np.ndarray
-    e1: np.ndarray
-    e2: np.ndarray
-    axis: np.ndarray
-    radius: np.ndarray
-    rise: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-
-
-def _pieces(spans: Spans, arrays: dict, idx: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray) -> _Pieces:
-    """:class:`_Pieces` of the parts ``[s_lo, s_hi]`` of spans ``idx`` (lines and arcs)."""
-    a = evaluate_path(arrays, idx, s_lo)[0]
-    b = evaluate_path(arrays, idx, s_hi)[0]
-    j = np.flatnonzero(spans.kind[idx] == SpanKind.ARC)
+def _pieces(spans: Spans, arrays: dict, idx: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray) -> dict[str, np.ndarray]:
+    """The parts ``[s_lo, s_hi]`` of spans ``idx`` (lines and arcs) as
+    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel` reads them: ends ``a``, ``b`` ``(J, 3)``, ``is_arc``,
+    and the arcs' centre, in-plane unit vectors, axis, radius, rise per radian and the part's angles ``lo``,
+    ``hi`` (zeros on lines)."""
+    j = idx.size
+    out = {"a": evaluate_path(arrays, idx, s_lo)[0], "b": evaluate_path(arrays, idx, s_hi)[0]}
+    out["is_arc"] = spans.kind[idx] == SpanKind.ARC
+    for f in ("center", "e1", "e2", "axis"):
+        out[f] = np.zeros((j, 3))
+    for f in ("radius", "rise", "lo", "hi"):
+        out[f] = np.zeros(j)
+    arc = np.flatnonzero(out["is_arc"])
     t: ArcTable = spans.arcs
-    it = spans.item[idx[j]]
+    it = spans.item[idx[arc]]
     r, h = t.radius[it], t.rise[it]
     omega = 1.0 / np.sqrt(r * r + h * h)
-    return _Pieces(a, b, j, t.center[it], t.e1[it], t.e2[it], t.axis[it], r, h, s_lo[j] * omega, s_hi[j] * omega)
-
-
-def _piece_distance(p: np.ndarray, pc: _Pieces) -> np.ndarray:
-    """Distance from ``p`` ``(J, Q, 3)`` to the parts ``pc``.
-
-    On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
-    on a circle; an upper bound on a helix, whose tiny parts barely rise).
-    """
-    out = _segment_distance(p, pc.a, pc.b)
-    if pc.arc.size:
-        j = pc.arc
-        rel = p[j] - pc.center[:, None]
-        phi = np.arctan2(np.sum(rel * pc.e2[:, None], axis=2), np.sum(rel * pc.e1[:, None], axis=2))
-        lo, hi = pc.lo[:, None], pc.hi[:, None]
-        mid = (lo + hi) / 2
-        psi = np.clip(mid + np.mod(phi - mid + np.pi, 2 * np.pi) - np.pi, lo, hi)
-        q = pc.center[:, None] + pc.radius[:, None, None] * (
-            np.cos(psi)[..., None] * pc.e1[:, None] + np.sin(psi)[..., None] * pc.e2[:, None]
-        )
-        q = q + (pc.rise[:, None] * psi)[..., None] * pc.axis[:, None]
-        out[j] = np.linalg.norm(p[j] - q, axis=2)
+    out["center"][arc], out["e1"][arc], out["e2"][arc], out["axis"][arc] = t.center[it], t.e1[it], t.e2[it], t.axis[it]
+    out["radius"][arc], out["rise"][arc], out["lo"][arc], out["hi"][arc] = r, h, s_lo[arc] * omega, s_hi[arc] * omega
     return out
 
 
@@ -199,41 +154,22 @@ _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axi
 
 
 def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
-    """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound).
-
-    ``min(d_in, d_out)`` is smooth where one piece is the nearer — between samples ``h`` apart it rises
-    above them by at most ``max|P''| h²/8`` — and peaks where the two are equal: there the crossing
-    is found by bisection between the samples that bracket it and measured.
-    """
+    """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound):
+    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel`, padded to a bucket (at least ``DEVIATION_BUCKET``
+    rows: the shrink rounds measure fewer blends each time, and each size would compile)."""
     arrays = span_arrays(spans)
-    start = evaluate_path(arrays, i, spans.length[i] - ell_a)[0][:, None]
+    n = i.size
+    m = max(bucket_size(n), DEVIATION_BUCKET)
+    start = evaluate_path(arrays, i, spans.length[i] - ell_a)[0]
     piece_in = _pieces(spans, arrays, i, spans.length[i] - ell_a, spans.length[i])
     piece_out = _pieces(spans, arrays, i + 1, np.zeros_like(ell_b), ell_b)
+    pad = [pad_rows(x, m, 0) for x in (coeffs, start)]  # padding rows: a blend at rest at the origin
+    piece_in, piece_out = ({k: pad_rows(v, m, 0) for k, v in pc.items()} for pc in (piece_in, piece_out))
+    return np.asarray(deviation_kernel(*pad, piece_in, piece_out))[:n]
 
-    def dist(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p = poly.bezier_derivatives(coeffs, u, 0)[0] + start  # the blend is relative to A
-        return _piece_distance(p, piece_in), _piece_distance(p, piece_out)
 
-    u = np.broadcast_to(np.linspace(0.0, 1.0, N_DEVIATION), (i.size, N_DEVIATION))
-    d_in, d_out = dist(u)
-    d2 = poly.bezier_derivatives(coeffs, u, 2)[2]
-    h = 1.0 / (N_DEVIATION - 1)
-    smooth = np.max(np.minimum(d_in, d_out), axis=1) + np.max(np.linalg.norm(d2, axis=2), axis=1) * h * h / 8
-    # the crossing: the first sample interval where the nearer piece changes (one per blend)
-    side = d_in < d_out
-    change = side[:, :-1] != side[:, 1:]
-    has = change.any(axis=1)
-    k = np.argmax(change, axis=1)
-    lo, hi = u[np.arange(i.size), k].copy(), u[np.arange(i.size), k + 1].copy()
-    lo_side = side[np.arange(i.size), k]
-    for _ in range(20):  # 2^-20 of the blend's parameter: max(d_in, d_out) there overestimates the peak by less
-        mid = (lo + hi) / 2
-        a, b = dist(mid[:, None])
-        same = (a[:, 0] < b[:, 0]) == lo_side
-        lo, hi = np.where(same, mid, lo), np.where(same, hi, mid)
-    a, b = dist(((lo + hi) / 2)[:, None])
-    crossing = np.where(has, np.maximum(a[:, 0], b[:, 0]), 0.0)
-    return np.maximum(smooth, crossing)
+#: Fewest rows :func:`_deviation` measures in one call (a few compiled sizes for all rounds).
+DEVIATION_BUCKET = 1024
 
 
 def _trims(n: int, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

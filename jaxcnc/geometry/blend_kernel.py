@@ -14,6 +14,7 @@ closed form where the control points give it: ``P'(0) = 5 (P1 - P0)``, ``P''(0) 
 
 from __future__ import annotations
 
+from functools import cache
 from math import comb
 
 import jax
@@ -47,8 +48,36 @@ def _horner(c: list[jnp.ndarray], u, order: int) -> list[jnp.ndarray]:
     return d
 
 
-@jax.jit
+#: XLA:CPU hands reductions and small dots to its YNNPACK fusions by default; on a blend's handful of
+#: values per row (sums of 3 squares, a 6×6 basis change) they cost more than XLA's own loops: the kernel
+#: of 65,536 blends 0.24 → 0.10 s CPU without them (the same formulas; sums in another order, so results
+#: differ in the last bits).
+_NO_YNN = {"xla_cpu_experimental_ynn_fusion_type": ""}
+
+
+@cache
+def cpu_loop_options() -> dict[str, str]:
+    """Compiler options that keep XLA:CPU's YNNPACK fusions out of small elementwise kernels (``{}`` where this
+    jaxlib does not know the option)."""
+    try:
+        jax.jit(lambda x: x + 1.0, compiler_options=_NO_YNN).lower(1.0).compile()
+    except jax.errors.JaxRuntimeError:
+        return {}
+    return dict(_NO_YNN)
+
+
 def blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray]:
+    """:func:`_blend_kernel` compiled with :func:`cpu_loop_options`; the arrays as it documents."""
+    return _compiled(_blend_kernel)(pts, corner)
+
+
+@cache
+def _compiled(fn):
+    """``fn`` jitted with :func:`cpu_loop_options`."""
+    return jax.jit(fn, compiler_options=cpu_loop_options())
+
+
+def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray]:
     """Fields of blends with control points ``pts`` ``(J, 6, 3)`` (absolute mm) at corners ``(J, 3)``.
 
     Returns a dict of arrays: ``coeffs`` ``(J, 6, 4)`` (homogeneous power basis relative to ``P0``),
@@ -139,3 +168,81 @@ def _segment_distance(p: jnp.ndarray, a: jnp.ndarray, b: jnp.ndarray) -> jnp.nda
     den = jnp.maximum(jnp.sum(ab * ab, axis=1), 1e-300)[:, None]
     t = jnp.clip(jnp.sum((p - a[:, None]) * ab[:, None], axis=2) / den, 0.0, 1.0)
     return jnp.linalg.norm(p - (a[:, None] + t[..., None] * ab[:, None]), axis=2)
+
+
+#: Points of a blend where its distance to the replaced pieces is sampled (:func:`deviation_kernel`).
+N_DEVIATION = 17
+#: Bisection steps for the point where the nearer of the two pieces changes.
+CROSS_BISECTIONS = 20
+
+
+def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
+    """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound), compiled with
+    :func:`cpu_loop_options`.
+
+    ``coeffs`` ``(J, 6, 4)``: the blends' homogeneous power-basis coefficients (weights 1) relative to their
+    start ``start`` ``(J, 3)``. ``piece_in``, ``piece_out``: each a dict of ``(J, ...)`` arrays: ``a``, ``b``
+    (the part's ends, ``(J, 3)``), ``is_arc`` (bool), and for arcs ``center``, ``e1``, ``e2``, ``axis``
+    ``(J, 3)``, ``radius``, ``rise``, ``lo``, ``hi`` (the part's angles) — zeros where ``is_arc`` is false.
+
+    ``min(d_in, d_out)`` is smooth where one piece is the nearer — between samples ``h`` apart it rises
+    above them by at most ``max|P''| h²/8`` — and peaks where the two are equal: there the crossing
+    is found by bisection between the samples that bracket it and measured.
+    """
+    return _compiled(_deviation_kernel)(coeffs, start, piece_in, piece_out)
+
+
+def _piece_distance(p: jnp.ndarray, pc: dict) -> jnp.ndarray:
+    """Distance from ``p`` ``(J, Q, 3)`` to the parts ``pc`` (:func:`deviation_kernel`).
+
+    On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
+    on a circle; an upper bound on a helix, whose tiny parts barely rise).
+    """
+    seg = _segment_distance(p, pc["a"], pc["b"])
+    rel = p - pc["center"][:, None]
+    phi = jnp.arctan2(jnp.sum(rel * pc["e2"][:, None], axis=2), jnp.sum(rel * pc["e1"][:, None], axis=2))
+    lo, hi = pc["lo"][:, None], pc["hi"][:, None]
+    mid = (lo + hi) / 2
+    psi = jnp.clip(mid + jnp.mod(phi - mid + jnp.pi, 2 * jnp.pi) - jnp.pi, lo, hi)
+    q = pc["center"][:, None] + pc["radius"][:, None, None] * (
+        jnp.cos(psi)[..., None] * pc["e1"][:, None] + jnp.sin(psi)[..., None] * pc["e2"][:, None]
+    )
+    q = q + (pc["rise"][:, None] * psi)[..., None] * pc["axis"][:, None]
+    return jnp.where(pc["is_arc"][:, None], jnp.linalg.norm(p - q, axis=2), seg)
+
+
+def _deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
+    """:func:`deviation_kernel` before compilation."""
+    cx = [[coeffs[:, k, i][:, None] for k in range(6)] for i in range(3)]
+
+    def dist(u: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+        p = jnp.stack([_horner(cx[i], u, 0)[0] for i in range(3)], axis=2) + start[:, None]
+        return _piece_distance(p, piece_in), _piece_distance(p, piece_out)
+
+    j = coeffs.shape[0]
+    grid = np.linspace(0.0, 1.0, N_DEVIATION)
+    u = jnp.broadcast_to(jnp.asarray(grid), (j, N_DEVIATION))
+    d_in, d_out = dist(u)
+    d2 = jnp.stack([_horner(cx[i], u, 2)[2] for i in range(3)], axis=2)
+    h = 1.0 / (N_DEVIATION - 1)
+    smooth = jnp.max(jnp.minimum(d_in, d_out), axis=1) + jnp.max(jnp.linalg.norm(d2, axis=2), axis=1) * h * h / 8
+    # the crossing: the first sample interval where the nearer piece changes (one per blend)
+    side = d_in < d_out
+    change = side[:, :-1] != side[:, 1:]
+    has = jnp.any(change, axis=1)
+    k = jnp.argmax(change, axis=1)
+    lo, hi = jnp.asarray(grid)[k], jnp.asarray(grid)[k + 1]
+    lo_side = jnp.take_along_axis(side, k[:, None], axis=1)[:, 0]
+
+    def halve(_, bounds):
+        lo, hi = bounds
+        mid = (lo + hi) / 2
+        a, b = dist(mid[:, None])
+        same = (a[:, 0] < b[:, 0]) == lo_side
+        return jnp.where(same, mid, lo), jnp.where(same, hi, mid)
+
+    # 2^-20 of the blend's parameter: max(d_in, d_out) there overestimates the peak by less
+    lo, hi = jax.lax.fori_loop(0, CROSS_BISECTIONS, halve, (lo, hi))
+    a, b = dist(((lo + hi) / 2)[:, None])
+    crossing = jnp.where(has, jnp.maximum(a[:, 0], b[:, 0]), 0.0)
+    return jnp.maximum(smooth, crossing)

@@ -1,0 +1,85 @@
+"""The compiled blend arithmetic: the deviation bound of line–arc blends is never below the blend's true
+distance to the pieces it replaces (hypothesis, random junctions, dense reference in NumPy)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxcnc.gcode import parse_gcode
+from jaxcnc.geometry import blend as B
+from jaxcnc.geometry import poly
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.spans import program_spans
+
+
+def _polyline_distance(p: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Distance from points ``(Q, 3)`` to the polyline through ``ref`` ``(R, 3)`` (exact per segment)."""
+    a, b = ref[:-1], ref[1:]
+    ab = b - a
+    t = np.clip(np.einsum("qrd,rd->qr", p[:, None] - a[None], ab) / np.maximum(np.sum(ab * ab, 1), 1e-300), 0, 1)
+    return np.min(np.linalg.norm(p[:, None] - (a[None] + t[..., None] * ab[None]), axis=2), axis=1)
+
+
+def _arc_end_at_origin(radius: float, sweep: float, ccw: bool, phi: float) -> tuple[np.ndarray, np.ndarray]:
+    """Start and centre of an arc ending at the origin with its end tangent at angle ``phi``."""
+    sgn = 1.0 if ccw else -1.0
+    center = sgn * radius * np.array([-np.sin(phi), np.cos(phi)])
+    rel = -center
+    c, s = np.cos(-sgn * sweep), np.sin(-sgn * sweep)
+    return center + np.array([c * rel[0] - s * rel[1], s * rel[0] + c * rel[1]]), center
+
+
+def _arc_start_at_origin(radius: float, sweep: float, ccw: bool, phi: float) -> tuple[np.ndarray, np.ndarray]:
+    """End and centre of an arc starting at the origin with its start tangent at angle ``phi``."""
+    sgn = 1.0 if ccw else -1.0
+    center = sgn * radius * np.array([-np.sin(phi), np.cos(phi)])
+    rel = -center
+    c, s = np.cos(sgn * sweep), np.sin(sgn * sweep)
+    return center + np.array([c * rel[0] - s * rel[1], s * rel[0] + c * rel[1]]), center
+
+
+junctions = st.tuples(
+    st.booleans(),  # line then arc (else arc then line)
+    st.floats(0.5, 20.0),  # line length
+    st.floats(0.3, 50.0),  # radius
+    st.floats(np.deg2rad(10), np.deg2rad(270)),  # sweep
+    st.booleans(),  # counter-clockwise
+    st.floats(np.deg2rad(0.5), np.deg2rad(150)) | st.floats(-np.deg2rad(150), -np.deg2rad(0.5)),  # kink
+    st.floats(0.05, 1.0),  # cut-back as a share of the largest allowed
+)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(junctions, min_size=1, max_size=4))
+def test_the_deviation_bound_is_never_below_the_dense_distance(cases):
+    for line_first, length, radius, sweep, ccw, kink, share in cases:
+        g = "G2" if not ccw else "G3"
+        if line_first:  # along +X into the origin, then the arc leaving at angle `kink`
+            end, center = _arc_start_at_origin(radius, sweep, ccw, kink)
+            arc = f"{g} X{end[0]:.9f} Y{end[1]:.9f} I{center[0]:.9f} J{center[1]:.9f}"
+            text = f"G0 X{-length:.9f} Y0\nG1 X0 Y0 F600\n{arc}\n"
+        else:  # the arc into the origin at angle `kink`, then along +X
+            start, center = _arc_end_at_origin(radius, sweep, ccw, kink)
+            i, j = center - start
+            text = f"G0 X{start[0]:.9f} Y{start[1]:.9f}\n{g} X0 Y0 I{i:.9f} J{j:.9f} F600\nG1 X{length:.9f} Y0\n"
+        spans = program_spans(parse_gcode(text, "j.ngc"))
+        k = np.array([len(spans) - 2])
+        ell = share * 0.5 * np.minimum(spans.length[k], spans.length[k + 1])
+        pts, _, _ = B._blend_points(spans, k, ell, ell)
+        coeffs = B._coeffs(pts)
+        bound = B._deviation(spans, k, ell, ell, coeffs)[0]
+        # dense reference: the blend at 801 points against 1501-point polylines of the two pieces (on an arc
+        # the chords lie inside it by at most δ²/8R: the slack allowed)
+        u = np.linspace(0.0, 1.0, 801)[None]
+        p = poly.bezier_derivatives(coeffs, u, 0)[0][0] + pts[0, 0]
+        arrays = span_arrays(spans)
+        s_in = np.linspace(spans.length[k[0]] - ell[0], spans.length[k[0]], 1501)
+        s_out = np.linspace(0.0, ell[0], 1501)
+        ref_in = evaluate_path(arrays, np.full(s_in.size, k[0]), s_in)[0]
+        ref_out = evaluate_path(arrays, np.full(s_out.size, k[0] + 1), s_out)[0]
+        dense = np.max(np.minimum(_polyline_distance(p, ref_in), _polyline_distance(p, ref_out)))
+        sagitta = (ell[0] / 1500) ** 2 / (8 * radius)
+        assert bound >= dense - sagitta - 1e-12, (text, bound, dense)
+        assert bound <= 1.25 * dense + 1e-9, (text, bound, dense)  # and a useful bound, not a loose one
