@@ -183,3 +183,67 @@ def test_bang_is_the_default_and_a_jerk_machine_gets_sync():
     pts = program_points(8, 200)
     assert DEFAULT_PULSE_PLANNER == "bang"
     assert plan_points(job(pts, "p"), GLASS).plan.planner == "bang"
+
+
+def _window(name: str, n: int) -> np.ndarray:
+    cloud = clouds.HARD_CASES[name]()
+    first = len(cloud) // 3
+    return cloud[first : first + n]
+
+
+@pytest.mark.parametrize("name", ["short-rows", "text"])
+def test_polish_never_longer_verified_and_not_below_the_window_optimum(name, monkeypatch):
+    """The polish (windows re-timed between pinned knot velocities) never lengthens the plan, its table is
+    verified at every tick, and it stays at or above the optimum of the window at rest (the LP's motion
+    model contains bang's)."""
+    from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
+    from jaxcnc.planners.pulsed import bang, pulse_window
+    from jaxcnc.planners.pulsed.bound import lower_bound_travel
+    from jaxcnc.planners.pulsed.optimum import optimum_window
+
+    pts = _window(name, 40)
+    planned = plan_points(job(pts, name), GLASS, "bang")
+    monkeypatch.setattr(bang, "POLISH_ROUNDS", 0)
+    before = plan_points(job(pts, name), GLASS, "bang").plan
+    ticks = np.diff(planned.plan.work_tick)
+    assert ticks.sum() <= np.diff(before.work_tick).sum()
+    assert _check_tables({"bang": planned}, GLASS) == "bang: ok"
+    win = pulse_window(GLASS)
+    V, A, _ = machine_limits(GLASS)
+    Vr, Ar, _ = request_limits(GLASS)
+    lb = lower_bound_travel(pts, win, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid)
+    caps = {"feed_mm_s": with_margin(GLASS.path.feed), "rapid_mm_s": with_margin(GLASS.path.rapid)}
+    opt = optimum_window(pts, win, Vr, Ar, lb.gap_ticks, start_ticks=ticks, rest_ends=True, max_seconds=60, **caps)
+    assert opt.ticks.sum() <= ticks.sum()
+    if opt.proven:
+        assert opt.lower_ticks <= ticks.sum()
+
+
+def test_polish_windows_keep_every_gap_in_the_model():
+    """After :func:`~jaxcnc.planners.pulsed.polish.polish` every gap passes from its knot velocity to the next
+    one's in bang's model (a degenerate interval projected through the gap contains the next velocity)."""
+    from jaxcnc.planners.pulsed import bang
+    from jaxcnc.planners.pulsed.bang import phase_fraction
+    from jaxcnc.planners.pulsed.polish import polish
+    from jaxcnc.planners.pulsed.windows import pulse_window
+
+    pts = clouds.HARD_CASES["short-rows"]()[:600]
+    w = pulse_window(GLASS)
+    D = np.diff(pts, axis=0)
+    f = w.tick_hz
+    A = np.full(3, 300.0)
+    capm = bang.path_caps(D, 50.0, np.full(3, 50.0))
+    capk = np.full((len(pts), 3), 30.0 / np.sqrt(3))
+    cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
+    lo = np.maximum(np.ceil(np.max(np.abs(D) / capm, axis=1) * f), w.n_min)
+    cand = bang.candidates(lo, w)
+    fwd, bwd = (bang._Gaps(D, cruise, capm, capk, bang.bucket_size(len(D)), reverse=r) for r in (False, True))
+    first = bang._sweep(fwd, bwd, cand, None, A, f, w, lookahead=bang.LOOKAHEAD)[0]
+    ticks, v, _ = bang._improve(fwd, bwd, cand, [first], A, f, w, bang.PASSES)
+    new, v2, q = polish(D, ticks, v, cruise, capm, capk, cand[:, 0], A, f, w)
+    assert new.sum() < ticks.sum()  # it gains here (jumps between the small spheres)
+    assert np.any(q != phase_fraction(cruise, np))
+    assert np.all(w.admissible(new, w.snap_up(new)[1]))
+    okg, L, U = bang.project(v2[:-1], v2[:-1], D, (new / f)[:, None], A, capm, capk[1:], q[:, None], xp=np)
+    tol = 1e-7 * (1 + np.abs(v2[1:]))
+    assert np.all(okg) and np.all((L <= v2[1:] + tol) & (v2[1:] <= U + tol))

@@ -103,6 +103,27 @@ def near_candidates(first: np.ndarray, prev: np.ndarray, window: PulseWindow) ->
     return np.sort(np.minimum(np.stack(cols, axis=1), prev[:, None]), axis=1)
 
 
+def phase_fraction(cruise, xp=jnp):
+    """Each gap's ramp fraction ``q``: ``cruise`` boolean (¼ cruising, else ½: two halves) or ``q`` itself."""
+    cruise = xp.asarray(cruise)
+    if cruise.dtype == bool:
+        return xp.where(cruise, 0.25, 0.5)
+    return cruise
+
+
+def _coefficients(m, h, A, cap_mid, cruise, xp=jnp):
+    """``(p, c, e, w)`` of a gap whose phases are ``q``, ``1 − 2q``, ``q`` of it (``q`` from ``cruise``).
+
+    The middle speed ``v_c = (m − q (v0 + v1)/2)/(1 − q)``; ``|v_c − v0| <= A q h`` and ``|v1 − v_c| <= A q h``
+    read ``|c − p v0 − v1| <= e`` and ``|c − v0 − p v1| <= e``, ``|v_c| <= cap`` reads ``|c − v0 − v1| <= w``,
+    with ``p = 2/q − 1``, ``c = (p + 1) m``, ``e = 2 (1 − q) A h``, ``w = (p − 1) cap`` (``q = ½``: ``3, 4m,
+    A h, 2 cap``; ``q = ¼``: ``7, 8m, 1.5 A h, 6 cap``).
+    """
+    q = phase_fraction(cruise, xp)
+    p = 2.0 / q - 1.0
+    return p, (p + 1.0) * m, 2.0 * (1.0 - q) * A * h, (p - 1.0) * cap_mid
+
+
 def _rows(D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     """The gap's linear conditions ``l <= α v0 + β v1 <= u``: four rows, last axis ``(..., 4)``.
 
@@ -113,14 +134,11 @@ def _rows(D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     (``|v_c| <= cap_mid``).
     """
     m = D / h
-    Ah = A * h
     one = xp.ones_like(m)
-    p = xp.where(cruise, 7.0, 3.0) * one
+    p, c, acc, vel = _coefficients(m, h, A, cap_mid, cruise, xp)
+    p = p * one
     alpha = xp.stack([p, one, one, 0.0 * one], axis=-1)
     beta = xp.stack([one, p, one, one], axis=-1)
-    c = xp.where(cruise, 8.0 * m, 4.0 * m)
-    acc = xp.where(cruise, 1.5 * Ah, Ah)
-    vel = xp.where(cruise, 6.0 * cap_mid, 2.0 * cap_mid)
     lo = xp.stack([c - acc, c - acc, c - vel, -cap_knot * one], axis=-1)
     hi = xp.stack([c + acc, c + acc, c + vel, cap_knot * one], axis=-1)
     return alpha, beta, lo, hi
@@ -138,11 +156,7 @@ def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     the largest ``y`` is ``min_i u_i(a)``, the smallest ``max_j l_j(b)``. ``xp``: ``jax.numpy`` (in the
     scans) or ``numpy``.
     """
-    m = D / h
-    p = xp.where(cruise, 7.0, 3.0)
-    c = xp.where(cruise, 8.0, 4.0) * m
-    e = xp.where(cruise, 1.5, 1.0) * A * h
-    w = xp.where(cruise, 6.0, 2.0) * cap_mid
+    p, c, e, w = _coefficients(D / h, h, A, cap_mid, cruise, xp)
     K = cap_knot
     hi_, lo_ = c + e, c - e
     q = p * p - 1.0
@@ -460,6 +474,9 @@ def recap(v: np.ndarray, direction: np.ndarray, path_mm_s: float, v_max: np.ndar
     return np.minimum(np.sqrt(w2) * path_mm_s, v_max[None])
 
 
+#: Rounds of :func:`~.polish.polish` (windows re-timed jointly between pinned knot velocities) after the sweeps.
+POLISH_ROUNDS = 1
+
 _COMPILER = ThreadPoolExecutor(max_workers=2, thread_name_prefix="bang-compile")
 
 
@@ -545,6 +562,13 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
         capk = capk2
         ticks, v, more = more
         tried += more[1:]
+    if POLISH_ROUNDS:
+        from jaxcnc.planners.pulsed.polish import polish
+
+        polished, v, cruise = polish(D, ticks, v, cruise, capm, capk, cand[:, 0], A, f, w, rounds=POLISH_ROUNDS)
+        if polished.sum() < ticks.sum():
+            tried.append(polished)
+        ticks = polished
     passes = [int(t.sum()) for t in tried]
     # the approach: rest to rest from the start to the first point, the first pulse on the next whole tick
     ua, length, vp, a, t = rest_to_rest(req, req.home[None], pts[:1], np.array([req.rapid_mm_s]))
@@ -555,9 +579,9 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     h = (ticks / f)[:, None]
     v0, v1 = v[:-1], v[1:]
     # three constant-acceleration phases per gap, ending at fractions q1, q2, 1 of it
-    cr = cruise[:, None]
-    q1, q2 = np.where(cruise, 0.25, 0.5), np.where(cruise, 0.75, 0.5)
-    vc = np.where(cr, 4.0 * D / (3.0 * h) - (v0 + v1) / 6.0, 2.0 * D / h - 0.5 * (v0 + v1))
+    q1 = phase_fraction(cruise, np)
+    q2 = 1.0 - q1
+    vc = (D / h - 0.5 * q1[:, None] * (v0 + v1)) / q2[:, None]
     a1 = (vc - v0) / (q1[:, None] * h)
     a3 = (v1 - vc) / ((1.0 - q2)[:, None] * h)
     t1, t2 = q1[:, None] * h, (q2 - q1)[:, None] * h

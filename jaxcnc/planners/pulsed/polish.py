@@ -1,0 +1,188 @@
+"""``bang``'s polish: short windows of gaps re-timed jointly between pinned knot velocities (issue 21).
+
+The sweeps of :mod:`.bang` change one gap at a time against sets computed with the other gaps' durations
+fixed, and only ever shorten a gap. On 40-point windows of the short-rows and text clouds the window optimum
+(:mod:`.optimum`) differs from ``bang`` in two ways, both joint moves the sweeps cannot make:
+
+- a **jump** (0.5–12 mm) takes one or more periods fewer, while the row gaps around it set up the speed
+  differently (the sweeps offer one period fewer per sweep and the neighbours' sets are those of the plan);
+- a **row change** (a step across and a reversal) takes one period instead of two, the next gap being
+  *lengthened* within its period range (238 → 259 ticks): a few ticks spent to save a period.
+
+Here every gap whose period count is above its shortest is the centre of a window of ``2 half + 1`` gaps;
+the velocities at the window's two end knots are pinned to the plan's, so windows are independent (the
+plan outside is untouched, its knots keep their speeds) and every window is solved at once (NumPy, batched,
+no loop over gaps). Inside, every combination of a few candidate counts per gap (the centre: its count and
+the tops of the one to three period ranges below it; its neighbours: their count and a few ticks longer or
+shorter within their range; the outer gaps: their count) is checked exactly in ``bang``'s motion model by
+propagating the speed intervals from the pinned entry velocity (:func:`~.bang.project`) and testing that
+the pinned exit velocity is reachable; the feasible combination with the least total is kept when it is
+shorter than the plan's, and the interior knot velocities are picked backwards from the pinned exit inside
+the forward intervals. Windows centred on gaps in one residue class modulo ``2 half + 1`` are disjoint, so
+the rounds run class by class.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxcnc.planners.pulsed.bang import EPS_MM_S, phase_fraction, project
+from jaxcnc.planners.pulsed.windows import PulseWindow, snap_up_ticks
+
+#: Gaps on each side of a window's centre.
+HALF = 2
+#: The centre's candidates: one to three period ranges fewer (each range's longest count and a few below it).
+CENTRE_DROPS = (1, 2, 3)
+CENTRE_BELOW = (0, 8, 24)
+#: The neighbours' candidates (ticks per period, relative to the plan's count, within its period range).
+NEIGHBOUR_STEPS = (0, 8, 16, -8)
+#: Ramp fractions ``q`` tried at a window's centre (besides its own): ½ two halves, less a cruise between.
+Q_CHOICES = (0.5, 0.375, 0.25, 0.1875, 0.125)
+
+
+def _centre_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow) -> np.ndarray:
+    """Candidate counts ``(w, C)`` for window centres: the plan's, and the tops of lower period ranges."""
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m = snap_up_ticks(prev, n_min, n_max, idle)[1]
+    cols = [prev]
+    for k in CENTRE_DROPS:
+        mk = np.maximum(m - k, 1)
+        for b in CENTRE_BELOW:
+            cols.append(np.maximum(mk * n_max - b * mk, mk * n_min))
+    out = np.stack(cols, axis=1)
+    out = np.maximum(out, first[:, None])
+    return snap_up_ticks(out, n_min, n_max, idle)[0]
+
+
+def _neighbour_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow) -> np.ndarray:
+    """Candidate counts ``(w, C)`` for a centre's neighbours: the plan's and a few ticks either side in its range."""
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m = snap_up_ticks(prev, n_min, n_max, idle)[1]
+    steps = np.array(NEIGHBOUR_STEPS)[None] * m[:, None]
+    out = np.clip(prev[:, None] + steps, (m * n_min)[:, None], (m * n_max)[:, None])
+    return np.maximum(out, first[:, None])
+
+
+def _combos(cands: list[np.ndarray]) -> np.ndarray:
+    """All combinations ``(w, P, k)`` of per-gap candidates ``[(w, C_j)]``."""
+    w = cands[0].shape[0]
+    grids = np.meshgrid(*[np.arange(c.shape[1]) for c in cands], indexing="ij")
+    idx = [gr.reshape(-1) for gr in grids]
+    return np.stack([c[:, i] for c, i in zip(cands, idx, strict=True)], axis=2).reshape(w, -1, len(cands))
+
+
+def _forward(v_in, D, ticks, q, capm, capk, A, f):
+    """Speed intervals at each knot of a window ``(w, P, k+1, 3)`` from the pinned ``v_in`` ``(w, 3)``.
+
+    ``D`` ``(w, k, 3)``, ``ticks`` and ``q`` ``(w, P, k)``, ``capm`` ``(w, k, 3)``, ``capk`` ``(w, k+1, 3)``.
+    Returns ``(ok (w, P), lo, hi)``.
+    """
+    P, k = ticks.shape[1], ticks.shape[2]
+    lo = np.broadcast_to(v_in[:, None], (v_in.shape[0], P, 3))
+    hi = lo
+    ok = np.ones(ticks.shape[:2], bool)
+    los, his = [lo], [hi]
+    for j in range(k):  # the window's few gaps, each batched over windows and combinations
+        h = ticks[:, :, j, None] / f
+        okj, lo, hi = project(
+            lo, hi, D[:, None, j], h, A, capm[:, None, j], capk[:, None, j + 1], q[:, :, j, None], xp=np
+        )
+        ok &= np.all(okj, axis=-1)
+        los.append(lo)
+        his.append(hi)
+    return ok, np.stack(los, axis=2), np.stack(his, axis=2)
+
+
+#: Windows solved at once (bounds the memory of the combinations).
+CHUNK = 256
+
+
+def polish(D, ticks, v, cruise, capm, capk, first, A, f, window: PulseWindow, half: int | None = None, rounds: int = 1):
+    """Re-time windows of ``2 half + 1`` gaps jointly between pinned knot velocities (module docstring).
+
+    ``D`` ``(g, 3)``, ``ticks`` ``(g,)`` the plan, ``v`` ``(g+1, 3)`` its knot velocities, ``cruise`` ``(g,)``
+    (boolean, or each gap's ramp fraction ``q``), ``capm`` ``(g, 3)``, ``capk`` ``(g+1, 3)`` (the caps the
+    plan keeps), ``first`` ``(g,)`` each gap's shortest admissible count. Returns ``(ticks, v, q)``: never
+    longer in total than the plan, every gap feasible in ``bang``'s model with the returned velocities and
+    ramp fractions ``q`` ``(g,)``.
+    """
+    ticks, v = ticks.copy(), v.copy()
+    q = np.array(phase_fraction(cruise, np), dtype=np.float64)
+    half = HALF if half is None else half
+    g, K = ticks.shape[0], 2 * half + 1
+    if g < K:
+        return ticks, v, q
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m0 = snap_up_ticks(first, n_min, n_max, idle)[1]
+    capk = np.broadcast_to(capk, (g + 1, 3))
+    for _ in range(rounds):
+        for r in range(K):
+            m = snap_up_ticks(ticks, n_min, n_max, idle)[1]
+            centre = np.flatnonzero((m > m0) & (np.arange(g) % K == r))
+            centre = centre[(centre >= half) & (centre + half < g)]
+            for part in np.array_split(centre, max(1, -(-centre.size // CHUNK))):
+                if part.size:
+                    _windows(part, half, D, ticks, v, q, capm, capk, first, A, f, window)
+    return ticks, v, q
+
+
+def _windows(centre, half, D, ticks, v, q, capm, capk, first, A, f, window) -> None:
+    """Solve the disjoint windows around ``centre`` ``(w,)``; ``ticks``, ``v``, ``q`` updated in place."""
+    K = 2 * half + 1
+    gaps = centre[:, None] + np.arange(-half, half + 1)[None]  # (w, K)
+    tk, qk = [], []
+    for j in range(K):
+        gj = gaps[:, j]
+        if j == half:
+            c = _centre_candidates(ticks[gj], first[gj], window)
+            qs = np.concatenate([q[gj, None], np.broadcast_to(np.array(Q_CHOICES), (gj.size, len(Q_CHOICES)))], 1)
+            tk.append(np.repeat(c, qs.shape[1], axis=1))
+            qk.append(np.tile(qs, (1, c.shape[1])))
+        elif abs(j - half) == 1:
+            c = _neighbour_candidates(ticks[gj], first[gj], window)
+            tk.append(c)
+            qk.append(np.broadcast_to(q[gj, None], c.shape))
+        else:
+            tk.append(ticks[gj][:, None])
+            qk.append(q[gj][:, None])
+    sel = _combos([np.arange(t.shape[1])[None].repeat(len(centre), 0) for t in tk])  # (w, P, K) indices
+    rows = np.arange(len(centre))[:, None]
+    combo = np.stack([tk[j][rows, sel[:, :, j]] for j in range(K)], axis=2)
+    qq = np.stack([qk[j][rows, sel[:, :, j]] for j in range(K)], axis=2)
+    Dw, cmw = D[gaps], capm[gaps]
+    ckw = capk[np.concatenate([gaps, gaps[:, -1:] + 1], axis=1)]
+    v_in, v_out = v[gaps[:, 0]], v[gaps[:, -1] + 1]
+    ok, lo, hi = _forward(v_in, Dw, combo, qq, cmw, ckw, A, f)
+    tol = EPS_MM_S * (1 + np.abs(v_out[:, None]))
+    ok &= np.all((lo[:, :, -1] <= v_out[:, None] + tol) & (hi[:, :, -1] >= v_out[:, None] - tol), axis=-1)
+    total = np.where(ok, combo.sum(axis=2), np.iinfo(np.int64).max)
+    best = np.argmin(total, axis=1)
+    gain = total[np.arange(len(centre)), best] < ticks[gaps].sum(axis=1)
+    if not np.any(gain):
+        return
+    w = np.flatnonzero(gain)
+    pick = best[w]
+    new, newq = combo[w, pick], qq[w, pick]  # (w', K)
+    flo, fhi = lo[w, pick], hi[w, pick]  # (w', K+1, 3)
+    vw = _pick_back(v_out[w], Dw[w], new, newq, cmw[w], ckw[w], flo, fhi, v[gaps[w]], A, f)
+    ticks[gaps[w]] = new
+    q[gaps[w]] = newq
+    v[gaps[w, 1:]] = vw[:, 1:]
+
+
+def _pick_back(v_out, D, ticks, q, capm, capk, flo, fhi, v_old, A, f):
+    """Interior knot velocities ``(w, K, 3)`` (index 0, the pinned entry, unchanged) picked backwards.
+
+    Knot ``j``'s velocity lies in its forward interval ``[flo, fhi]`` and reaches knot ``j+1``'s through gap
+    ``j`` (the time-reversed :func:`~.bang.project` of that single speed): nearest the plan's old velocity.
+    """
+    K = ticks.shape[1]
+    out = v_old.copy()
+    nxt = v_out
+    for j in range(K - 1, 0, -1):  # the window's few knots
+        h = ticks[:, j, None] / f
+        _, L, U = project(-nxt, -nxt, -D[:, j], h, A, capm[:, j], capk[:, j], q[:, j, None], xp=np)
+        a, b = np.maximum(-U, flo[:, j]), np.minimum(-L, fhi[:, j])
+        nxt = np.clip(v_old[:, j], a, np.maximum(a, b))
+        out[:, j] = nxt
+    return out
