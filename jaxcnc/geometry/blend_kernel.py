@@ -126,8 +126,9 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
     # they are equal — on the plane through the corner normal to t_in + t_out, which the blend crosses
     # once: that point (Newton on the quintic (P(u) - C)·n = 0) is measured too
     us = jnp.concatenate([jnp.zeros((1, 1)), gx, jnp.ones((1, 1))], axis=1)
-    pos = jnp.stack([_horner([ci[:, None] for ci in cx[i]], us, 0)[0] for i in range(3)], axis=2) + pts[:, :1, :]
-    dist = jnp.minimum(_segment_distance(pos, pts[:, 0], corner), _segment_distance(pos, corner, pts[:, 5]))
+    # points as three (J, Q) columns, not (J, Q, 3): XLA:CPU vectorises along the last axis
+    pos = [_horner([ci[:, None] for ci in cx[i]], us, 0)[0] + pts[:, :1, i] for i in range(3)]
+    dist = jnp.minimum(_segment_distance_cols(pos, pts[:, 0], corner), _segment_distance_cols(pos, corner, pts[:, 5]))
     t_in = corner - pts[:, 0]
     t_out = pts[:, 5] - corner
     n = t_in / jnp.linalg.norm(t_in, axis=1, keepdims=True) + t_out / jnp.linalg.norm(t_out, axis=1, keepdims=True)
@@ -140,8 +141,8 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
         uc = jnp.clip(uc - f / jnp.where(fp != 0, fp, 1.0), 0.0, 1.0)
     pc = jnp.stack([_horner([ci for ci in cx[i]], uc, 0)[0] for i in range(3)], axis=1)[:, None, :] + pts[:, :1, :]
     at_cross = jnp.minimum(_segment_distance(pc, pts[:, 0], corner), _segment_distance(pc, corner, pts[:, 5]))[:, 0]
-    d2 = jnp.stack([_horner([ci[:, None] for ci in cx[i]], us, 2)[2] for i in range(3)], axis=2)
-    d2max = jnp.max(jnp.linalg.norm(d2, axis=2), axis=1)
+    d2 = [_horner([ci[:, None] for ci in cx[i]], us, 2)[2] for i in range(3)]
+    d2max = jnp.max(jnp.sqrt(d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]), axis=1)
     h = float(np.max(np.diff(np.concatenate([[0.0], _GX, [1.0]]))))
     t0 = p1_0 / jnp.linalg.norm(p1_0, axis=1, keepdims=True)
     t1 = p1_1 / jnp.linalg.norm(p1_1, axis=1, keepdims=True)
@@ -160,6 +161,16 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
         "t1": t1,
         "dev": jnp.maximum(jnp.max(dist, axis=1) + d2max * h * h / 8, at_cross),
     }
+
+
+def _segment_distance_cols(p: list[jnp.ndarray], a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
+    """Distance ``(J, Q)`` from points given as three ``(J, Q)`` coordinate columns to segments ``a``–``b``
+    ``(J, 3)``."""
+    ab = [b[:, i, None] - a[:, i, None] for i in range(3)]
+    den = jnp.maximum(ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2], 1e-300)
+    t = jnp.clip(sum((p[i] - a[:, i, None]) * ab[i] for i in range(3)) / den, 0.0, 1.0)
+    d = [p[i] - (a[:, i, None] + t * ab[i]) for i in range(3)]
+    return jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
 def _segment_distance(p: jnp.ndarray, a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
