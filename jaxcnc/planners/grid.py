@@ -104,10 +104,13 @@ def interval_counts(spans: Spans) -> np.ndarray:
     return n.astype(np.int64)
 
 
-@partial(jax.jit, static_argnames=("order",))
-def path_frame(arrays: dict, span: jnp.ndarray, s: jnp.ndarray, order: int = 2) -> tuple[jnp.ndarray, ...]:
-    """The path's derivatives 1..``order`` (each ``(m, 3)``) at ``s`` along span ``span`` ``(m,)``."""
-    return evaluate_path(arrays, span, s, order, xp=jnp)[1:]
+@partial(jax.jit, static_argnames=("order", "only"))
+def path_frame(
+    arrays: dict, span: jnp.ndarray, s: jnp.ndarray, order: int = 2, only: str | None = None
+) -> tuple[jnp.ndarray, ...]:
+    """The path's derivatives 1..``order`` (each ``(m, 3)``) at ``s`` along span ``span`` ``(m,)`` (``only``: as
+    :func:`~jaxcnc.geometry.evaluate.evaluate_path`'s, every queried span of that family)."""
+    return evaluate_path(arrays, span, s, order, xp=jnp, only=only)[1:]
 
 
 def device_spans(spans: Spans, first: int = 0, last: int | None = None) -> dict[str, jnp.ndarray]:
@@ -120,17 +123,20 @@ def device_spans(spans: Spans, first: int = 0, last: int | None = None) -> dict[
     return span_arrays(pad_spans(sub, bucket_size(len(sub))), xp=jnp)
 
 
-def frames_at(arrays: dict, span: np.ndarray, s: np.ndarray, order: int = 2) -> tuple[np.ndarray, ...]:
+def frames_at(
+    arrays: dict, span: np.ndarray, s: np.ndarray, order: int = 2, only: str | None = None
+) -> tuple[np.ndarray, ...]:
     """:func:`path_frame` for NumPy queries ``(q,)``, padded to a bucket (few compiled sizes).
 
-    ``arrays`` comes from :func:`device_spans`.
+    ``arrays`` comes from :func:`device_spans`; ``only="arc"`` where every queried span is an arc or helix (the
+    same values; the other kinds' formulas are not evaluated).
     """
     q = span.size
     m = bucket_size(q)
     which = np.zeros(m, np.int64)
     where = np.zeros(m)
     which[:q], where[:q] = span, s
-    return tuple(np.asarray(d)[:q] for d in path_frame(arrays, which, where, order))
+    return tuple(np.asarray(d)[:q] for d in path_frame(arrays, which, where, order, only))
 
 
 @jax.jit
@@ -194,7 +200,9 @@ def build_grid(
     if plain.size or box.size:
         arrays = device_spans(spans, first, last) if arrays is None else arrays
     if plain.size:
-        t, k = frames_at(arrays, np.concatenate([local[plain]] * 2), np.concatenate([s_start[plain], s_end[plain]]))
+        only = "arc" if np.all(spans.kind[span[plain]] == SpanKind.ARC) else None
+        where = np.concatenate([s_start[plain], s_end[plain]])
+        t, k = frames_at(arrays, np.concatenate([local[plain]] * 2), where, only=only)
         t_a[plain], t_b[plain] = t[: plain.size], t[plain.size :]
         k_a[plain], k_b[plain] = k[: plain.size], k[plain.size :]
     t_lo, t_hi, k_lo, k_hi = t_a.copy(), t_a.copy(), k_a.copy(), k_a.copy()
