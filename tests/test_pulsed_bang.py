@@ -10,7 +10,7 @@ from jaxcnc.io import clouds
 from jaxcnc.io.points import PointJob
 from jaxcnc.machine import parse_machine
 from jaxcnc.planners.pulsed import plan_points
-from jaxcnc.planners.pulsed.bang import project
+from jaxcnc.planners.pulsed.bang import lens_profile, lens_project, polygon_project, project
 
 GLASS = glass_engraver()
 
@@ -57,7 +57,7 @@ def test_jerk_limited_machine_falls_back_to_sync():
 
 
 def test_projection_matches_brute_force():
-    """The closed-form interval of reachable exit speeds equals a dense search over entry/exit pairs."""
+    """The polygon's closed-form interval of reachable exit speeds equals a dense search over entry/exit pairs."""
     rng = np.random.default_rng(5)
     A, cap = np.array([300.0]), np.array([17.0])
     for _ in range(40):
@@ -66,7 +66,8 @@ def test_projection_matches_brute_force():
         hi0 = lo0 + rng.uniform(0, 8)
         cruise = bool(rng.random() < 0.5)
         ok, L, U = (
-            np.asarray(x)[0] for x in project(np.array([lo0]), np.array([hi0]), np.array([D]), h, A, cap, cap, cruise)
+            np.asarray(x)[0]
+            for x in polygon_project(np.array([lo0]), np.array([hi0]), np.array([D]), h, A, cap, cap, cruise)
         )
         v0 = np.linspace(lo0, hi0, 401)[:, None]
         v1 = np.linspace(-cap[0], cap[0], 4001)[None]
@@ -83,6 +84,42 @@ def test_projection_matches_brute_force():
         if reach.size:
             step = 2 * cap[0] / 4000 + (hi0 - lo0) / 400 * 7
             assert abs(reach.min() - L) <= step and abs(reach.max() - U) <= step
+
+
+def test_lens_projection_matches_brute_force_and_its_profile_realises_it():
+    """The lens' closed-form exit interval equals a dense search over pairs meeting ``Dmin <= D <= Dmax`` (the
+    exact set of every motion with ``|a| <= A``, integrated numerically here) and the caps; each pair found is
+    realised by :func:`lens_profile`: end speed, distance, ``|a| <= A`` and the speed within the cap."""
+    rng = np.random.default_rng(0)
+    A = 300.0
+    for _ in range(40):
+        D, h = rng.uniform(-1.5, 1.5), rng.uniform(0.0238, 0.08)
+        W, K = rng.uniform(20, 50), rng.uniform(5, 30)
+        lo0 = rng.uniform(-K, K)
+        hi0 = min(K, lo0 + rng.uniform(0, 10))
+        ok, L, U = (float(x) for x in lens_project(np.array(lo0), np.array(hi0), D, h, A, W, K, xp=np))
+        xs, ys = np.linspace(lo0, hi0, 21)[:, None], np.linspace(-K, K, 401)[None]
+        t = np.linspace(0.0, h, 401)[:, None, None]
+        dmax = np.trapezoid(np.minimum(xs + A * t, ys + A * (h - t)), t, axis=0)
+        dmin = np.trapezoid(np.maximum(xs - A * t, ys - A * (h - t)), t, axis=0)
+        m = D / h
+        good = (dmin <= D + 1e-4) & (D <= dmax + 1e-4) & (np.abs(ys - xs) <= A * h)
+        good &= (np.abs(2 * m - xs) <= W) & (np.abs(2 * m - ys) <= W) & (np.abs(xs) <= W) & (np.abs(ys) <= W)
+        reach = np.broadcast_to(ys, good.shape)[good]
+        step = 2 * K / 400 + (hi0 - lo0) / 20 * 3 + 0.05
+        if not reach.size or not ok:  # either both empty, or the other's set is a sliver at the tolerance
+            assert (not ok or U - L <= step) and (not reach.size or reach.max() - reach.min() <= step)
+            continue
+        assert abs(reach.min() - L) <= step and abs(reach.max() - U) <= step
+        for x, y in ((lo0, L), (hi0, U), (0.5 * (lo0 + hi0), 0.5 * (L + U))):
+            lo_y, hi_y = (float(z) for z in lens_project(np.array(x), np.array(x), D, h, A, W, K, xp=np)[1:])
+            if not lo_y <= y <= hi_y:
+                continue
+            ts, a1, a2 = lens_profile(np.array(x), np.array(y), np.array(D), np.array(h))
+            vs = x + a1 * ts
+            assert vs + a2 * (h - ts) == pytest.approx(y, abs=1e-9)
+            assert x * ts + a1 * ts**2 / 2 + vs * (h - ts) + a2 * (h - ts) ** 2 / 2 == pytest.approx(D, abs=1e-12)
+            assert abs(a1) <= A * (1 + 1e-9) and max(abs(x), abs(vs), abs(y)) <= W * (1 + 1e-9)
 
 
 def test_sweeps_never_lengthen_and_path_speed_within_feed_at_pulses_and_rapid_between():
@@ -244,6 +281,18 @@ def test_polish_windows_keep_every_gap_in_the_model():
     assert new.sum() < ticks.sum()  # it gains here (jumps between the small spheres)
     assert np.any(q != phase_fraction(cruise, np))
     assert np.all(w.admissible(new, w.snap_up(new)[1]))
-    okg, L, U = bang.project(v2[:-1], v2[:-1], D, (new / f)[:, None], A, capm, capk[1:], q[:, None], xp=np)
-    tol = 1e-7 * (1 + np.abs(v2[1:]))
-    assert np.all(okg) and np.all((L <= v2[1:] + tol) & (v2[1:] <= U + tol))
+    # the motion the table gets: every piece within |a| <= A and each axis' cap, through every point
+    work = np.concatenate([[0], np.cumsum(new)])
+    starts, c = bang.gap_pieces(pts, D, new, v2, q, work, f)
+    ends = np.append(starts[1:], work[-1])
+    tau = ((ends - starts) / f)[:, None]
+    assert np.all(tau >= -1e-12)
+    end_pos = c[:, 0] + c[:, 1] * tau + c[:, 2] * tau**2
+    end_vel = c[:, 1] + 2 * c[:, 2] * tau
+    last = np.isin(ends, work[1:])  # each gap's last piece ends on the next pulse
+    assert last.sum() == len(new) and np.allclose(end_pos[last], pts[1:], atol=1e-9)
+    assert np.allclose(end_pos[:-1], c[1:, 0], atol=1e-9) and np.allclose(end_vel[:-1], c[1:, 1], atol=1e-7)
+    assert np.all(np.abs(2 * c[:, 2]) <= A * (1 + 1e-7))
+    cap = capm[np.searchsorted(work, starts, side="right") - 1]
+    assert np.all(np.abs(c[:, 1]) <= cap + 1e-7) and np.all(np.abs(end_vel) <= cap + 1e-7)
+    assert np.all(np.abs(v2) <= capk + 1e-7)

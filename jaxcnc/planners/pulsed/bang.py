@@ -108,7 +108,7 @@ def phase_fraction(cruise, xp=jnp):
     cruise = xp.asarray(cruise)
     if cruise.dtype == bool:
         return xp.where(cruise, 0.25, 0.5)
-    return cruise
+    return cruise  # a ramp fraction in (0, ½], or LENS_Q
 
 
 def _coefficients(m, h, A, cap_mid, cruise, xp=jnp):
@@ -144,8 +144,94 @@ def _rows(D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     return alpha, beta, lo, hi
 
 
+#: The ramp fraction that marks a gap moving in the lens of every two-phase motion (:func:`lens_project`)
+#: instead of a polygon; the polish (:mod:`.polish`) gives it to the gaps of its windows, the sweeps keep the
+#: polygons (booleans: ``q`` ¼ or ½).
+LENS_Q = 1.0
+#: ``False``: no lens anywhere (the polish keeps the polygons).
+LENS = True
+
+
+def is_lens(cruise, xp=jnp):
+    """Whether each gap moves in the lens model: ``q`` (:func:`phase_fraction`) is :data:`LENS_Q`."""
+    return phase_fraction(cruise, xp) > 0.5
+
+
 def project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
     """Speeds ``v1`` reachable from ``v0 ∈ [lo0, hi0]`` over a gap: ``(ok, L, U)``, broadcast.
+
+    Gaps marked :data:`LENS_Q` in the lens of every two-phase motion (:func:`lens_project`), the others in
+    their polygon of phases ``q, 1 − 2q, q`` (:func:`polygon_project`); both closed form. ``cruise`` boolean
+    (the sweeps): polygons only; else both computed where both occur (no branch).
+    """
+    if xp.asarray(cruise).dtype == bool:  # the sweeps: polygons only
+        return polygon_project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp)
+    use = is_lens(cruise, xp)
+    if xp is np and np.all(use):  # NumPy callers with lens gaps only (the polish): one model to compute
+        return lens_project(lo0, hi0, D, h, A, cap_mid, cap_knot, xp)
+    poly = polygon_project(lo0, hi0, D, h, A, cap_mid, cap_knot, xp.where(use, 0.5, cruise), xp)
+    if xp is np and not np.any(use):
+        return poly
+    lens = lens_project(lo0, hi0, D, h, A, cap_mid, cap_knot, xp)
+    return tuple(xp.where(use, a, b) for a, b in zip(lens, poly, strict=True))
+
+
+def _lens_bounds(x, m, E, xp):
+    """The lens' exit speeds from entry ``x``: ``(y_lo(x), y_hi(x))``, both non-increasing in ``x``."""
+    u = 4.0 * E * (x - m)
+    two = 2.0 * E * E
+    return x + E - xp.sqrt(xp.maximum(0.0, two + u)), x - E + xp.sqrt(xp.maximum(0.0, two - u))
+
+
+def lens_project(lo0, hi0, D, h, A, cap_mid, cap_knot, xp=jnp):
+    """Speeds ``v1`` reachable from ``v0 ∈ [lo0, hi0]`` over a gap with *any* two-phase motion: ``(ok, L, U)``.
+
+    With ``|a| <= A`` the pairs ``(x, y) = (v0, v1)`` that cover ``D`` in ``h`` form a convex lens:
+    ``|(x + y)/2 − m| <= E/4 − (y − x)²/(4E)`` (``m = D/h``, ``E = A h``; the farthest and nearest motions
+    are tents), realised by two phases of accelerations ``±a``, ``a <= A`` (:func:`lens_profile`); its
+    peak is at most ``2m − min(x, y)`` and its valley at least ``2m − max(x, y)``, so ``|2m − x| <= W`` and
+    ``|2m − y| <= W`` with ``|x|, |y| <= W`` keep each axis within ``W = cap_mid`` all along (the axes switch
+    at different instants, so unlike the common-phase polygons the box must hold at the knots too), and
+    ``|y| <= K``. The ½–½ polygon of
+    :func:`_rows` is this lens' inscribed rhombus (a third less area): the lens lets a row gap shed or
+    gain more speed. For ``x ∈ [m − E/2, m + E/2]`` the exit speeds are ``[y_lo(x), y_hi(x)]``
+    (:func:`_lens_bounds`, both non-increasing); the lens is symmetric in ``x ↔ y``, so the entries that
+    reach an exit interval ``[Y0, Y1]`` are ``[y_lo(Y1), y_hi(Y0)]``: closed form, like :func:`project`.
+    """
+    m = D / h
+    E = A * h
+    W, K = cap_mid, cap_knot
+    dlo, dhi = m - 0.5 * E, m + 0.5 * E
+    Ylo = xp.maximum(xp.maximum(-xp.minimum(K, W), 2.0 * m - W), dlo)
+    Yhi = xp.minimum(xp.minimum(xp.minimum(K, W), 2.0 * m + W), dhi)
+    a = xp.maximum(xp.maximum(lo0, _lens_bounds(Yhi, m, E, xp)[0]), xp.maximum(xp.maximum(2.0 * m, 0.0) - W, dlo))
+    b = xp.minimum(xp.minimum(hi0, _lens_bounds(Ylo, m, E, xp)[1]), xp.minimum(xp.minimum(2.0 * m, 0.0) + W, dhi))
+    tol = 1e-12 * (1 + xp.abs(b))
+    ok = (a <= b + tol) & (Ylo <= Yhi + tol)
+    b = xp.maximum(a, b)
+    U = xp.minimum(_lens_bounds(a, m, E, xp)[1], Yhi)
+    L = xp.maximum(_lens_bounds(b, m, E, xp)[0], Ylo)
+    return ok & (L <= U + 1e-12 * (1 + xp.abs(U))), L, xp.maximum(L, U)
+
+
+def lens_profile(v0, v1, D, h):
+    """The two-phase motion of a lens point: ``(t_s, a1, a2)`` (switch time, accelerations ``±a``), NumPy.
+
+    ``e = m − (v0 + v1)/2``, ``δ = v1 − v0``: ``a h = 2|e| + √(4e² + δ²)``, a tent (``+a`` then ``−a``,
+    ``t_s = (h + δ/a)/2``) where ``e >= 0``, else a valley (``t_s = (h − δ/a)/2``); ``a <= A`` inside the lens.
+    """
+    e = D / h - 0.5 * (v0 + v1)
+    d = v1 - v0
+    ah = 2.0 * np.abs(e) + np.sqrt(4.0 * e * e + d * d)
+    s = np.where(e >= 0.0, 1.0, -1.0)
+    a = ah / h
+    safe = ah > 1e-12
+    ts = np.where(safe, 0.5 * (h + s * d * h / np.where(safe, ah, 1.0)), 0.5 * h)
+    return np.clip(ts, 0.0, h), s * a, -s * a
+
+
+def polygon_project(lo0, hi0, D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
+    """Speeds ``v1`` reachable from ``v0 ∈ [lo0, hi0]`` over a gap of phases ``q, 1 − 2q, q``: ``(ok, L, U)``.
 
     The rows of :func:`_rows` are ``c − e <= p x + y <= c + e``, ``c − e <= x + p y <= c + e``,
     ``c − w <= x + y <= c + w``, ``|y| <= K`` (``x = v0``, ``y = v1``; ``p = 3``, ``c = 4m``, ``e = A h``,
@@ -301,6 +387,13 @@ def backward(D, ticks, cruise, capm, capk, lo, hi, A, tick_hz):
         alpha, beta, l, u = _rows(d, hh, A, cm, ck, cr)
         lo_v0 = jnp.max((l[:, :3] - beta[:, :3] * v1[:, None]) / alpha[:, :3], axis=1)
         hi_v0 = jnp.min((u[:, :3] - beta[:, :3] * v1[:, None]) / alpha[:, :3], axis=1)
+        if cr.dtype != bool:  # the lens is symmetric in (v0, v1): the entries that reach v1 are [y_lo(v1), y_hi(v1)]
+            m, E = d / hh, A * hh
+            ylo, yhi = _lens_bounds(v1, m, E, jnp)
+            ylo = jnp.maximum(ylo, jnp.maximum(jnp.maximum(2.0 * m, 0.0) - cm, m - 0.5 * E))
+            yhi = jnp.minimum(yhi, jnp.minimum(jnp.minimum(2.0 * m, 0.0) + cm, m + 0.5 * E))
+            use = is_lens(cr)
+            lo_v0, hi_v0 = jnp.where(use, ylo, lo_v0), jnp.where(use, yhi, hi_v0)
         a, b = jnp.maximum(l0, lo_v0), jnp.minimum(h0, hi_v0)
         v0 = jnp.clip(p, a, jnp.maximum(a, b))
         return v0, v0
@@ -518,6 +611,64 @@ def _precompile(size: int, n_first: int, A: np.ndarray, f: float) -> list[Future
     return [_COMPILER.submit(lambda fn=fn, args=args: fn.lower(*args).compile()) for fn, args in jobs]
 
 
+def gap_pieces(pts, D, ticks, v, cruise, work, f):
+    """The gaps' motion as pieces: ``(starts (p,) ticks, coeffs (p, 4, 3))``, in time order.
+
+    A polygon gap (``q <= ½``) has three pieces, switching at ``q h`` and ``(1 − q) h`` on every axis, the
+    cruise at ``v_c = (m − q (v0 + v1)/2)/(1 − q)`` (the middle one of zero length at ``q = ½``). A lens gap
+    (:data:`LENS_Q`) switches each axis at its own ``t_s`` (:func:`lens_profile`): pieces from ``0`` and
+    the three sorted switch instants (:func:`_lens_pieces`). Each piece's coefficients are every axis'
+    position, velocity and half acceleration at its start. ``work`` ``(g+1,)``: the pulses' ticks.
+    """
+    lens = np.asarray(is_lens(cruise, np))
+    poly = np.flatnonzero(~lens)
+    h = (ticks[poly] / f)[:, None]
+    v0, v1, Dp, p0 = v[:-1][poly], v[1:][poly], D[poly], pts[:-1][poly]
+    q1 = phase_fraction(cruise, np)[poly]
+    q2 = 1.0 - q1
+    vc = (Dp / h - 0.5 * q1[:, None] * (v0 + v1)) / q2[:, None]
+    a1 = (vc - v0) / (q1[:, None] * h)
+    a3 = (v1 - vc) / (q1[:, None] * h)
+    t1, t2 = q1[:, None] * h, (q2 - q1)[:, None] * h
+    c = np.zeros((poly.size, 3, 4, 3))
+    c[:, 0, 0], c[:, 0, 1], c[:, 0, 2] = p0, v0, 0.5 * a1
+    c[:, 1, 0], c[:, 1, 1] = p0 + v0 * t1 + 0.5 * a1 * t1 * t1, vc
+    c[:, 2, 0], c[:, 2, 1], c[:, 2, 2] = c[:, 1, 0] + vc * t2, vc, 0.5 * a3
+    w0 = work[:-1][poly]
+    starts = np.column_stack([w0, w0 + q1 * ticks[poly], w0 + q2 * ticks[poly]]).astype(np.float64)
+    gap = np.repeat(poly, 3)
+    starts, c = starts.reshape(-1), c.reshape(-1, 4, 3)
+    if np.any(lens):
+        idx = np.flatnonzero(lens)
+        ls, lc, lg = _lens_pieces(pts, D, ticks, v, work, f, idx)
+        order = np.argsort(np.concatenate([gap, lg]), kind="stable")  # each gap's pieces stay in time order
+        starts, c = np.concatenate([starts, ls])[order], np.concatenate([c, lc])[order]
+    return starts, c
+
+
+def _lens_pieces(pts, D, ticks, v, work, f, idx):
+    """Pieces of the lens gaps ``idx``: ``(starts, coeffs, gap index)``; slivers under 1e-6 tick dropped."""
+    g = idx.size
+    h = (ticks[idx] / f)[:, None]
+    v0, v1, Dl = v[:-1][idx], v[1:][idx], D[idx]
+    ts, a1, a3 = lens_profile(v0, v1, Dl, np.broadcast_to(h, Dl.shape))  # (g, 3) each
+    sliver = 1e-6 / f  # a piece shorter than this is dropped, the piece before covers it (~1e-10 s)
+    ts = np.where(ts < sliver, 0.0, np.where(ts > h - sliver, h, ts))  # one phase: no sliver of the other
+    at = np.sort(np.concatenate([np.zeros((g, 1)), ts], axis=1), axis=1)  # (g, 4) piece starts, s
+    tau, T = at[:, :, None], ts[:, None]  # (g, 4, 1), (g, 1, 3)
+    d1, d2 = np.minimum(tau, T), np.maximum(tau - T, 0.0)
+    V0, A1, A3 = v0[:, None], a1[:, None], a3[:, None]
+    u1 = V0 + A1 * d1
+    c = np.zeros((g, 4, 4, 3))
+    c[:, :, 0] = pts[:-1][idx][:, None] + V0 * d1 + 0.5 * A1 * d1 * d1 + u1 * d2 + 0.5 * A3 * d2 * d2
+    c[:, :, 1] = u1 + A3 * d2
+    end = np.concatenate([at[:, 1:], h], axis=1)[:, :, None]
+    c[:, :, 2] = 0.5 * np.where(0.5 * (tau + end) < T, A1, A3)
+    keep = np.concatenate([np.ones((g, 1), bool), (np.diff(at, axis=1) > sliver) & (at[:, 1:] < h - sliver)], 1)
+    starts = work[:-1][idx][:, None] + at * f
+    return starts[keep], c[keep], np.repeat(idx[:, None], 4, axis=1)[keep]
+
+
 @register_pulse_planner("bang")
 def plan_bang(req: PulseRequest) -> PulsePlan:
     """Plan with constant-acceleration pieces and knot speeds from interval propagation (module docstring)."""
@@ -576,21 +727,7 @@ def plan_bang(req: PulseRequest) -> PulsePlan:
     a_starts, a_coeffs, arrive = move_pieces(z, req.home[None], ua, z, vp, z, length, a, f)
     first = int(np.ceil(float(arrive[0]) - 1e-9))
     work = first + np.concatenate([[0], np.cumsum(ticks)])
-    h = (ticks / f)[:, None]
-    v0, v1 = v[:-1], v[1:]
-    # three constant-acceleration phases per gap, ending at fractions q1, q2, 1 of it
-    q1 = phase_fraction(cruise, np)
-    q2 = 1.0 - q1
-    vc = (D / h - 0.5 * q1[:, None] * (v0 + v1)) / q2[:, None]
-    a1 = (vc - v0) / (q1[:, None] * h)
-    a3 = (v1 - vc) / ((1.0 - q2)[:, None] * h)
-    t1, t2 = q1[:, None] * h, (q2 - q1)[:, None] * h
-    c = np.zeros((g, 3, 4, 3))
-    c[:, 0, 0], c[:, 0, 1], c[:, 0, 2] = pts[:-1], v0, 0.5 * a1
-    c[:, 1, 0], c[:, 1, 1] = pts[:-1] + v0 * t1 + 0.5 * a1 * t1 * t1, vc
-    c[:, 2, 0], c[:, 2, 1], c[:, 2, 2] = c[:, 1, 0] + vc * t2, vc, 0.5 * a3
-    c = c.reshape(3 * g, 4, 3)
-    half = np.column_stack([work[:-1], work[:-1] + q1 * ticks, work[:-1] + q2 * ticks]).reshape(-1).astype(np.float64)
+    half, c = gap_pieces(pts, D, ticks, v, cruise, work, f)
     starts = np.concatenate([a_starts, arrive, half, work[-1:].astype(np.float64)])
     coeffs = np.concatenate([a_coeffs, rest_pieces(arrive, pts[:1]), c, rest_pieces(z, pts[-1:])])
     _, m = w.snap_up(ticks)

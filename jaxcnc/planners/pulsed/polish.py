@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxcnc.planners.pulsed.bang import EPS_MM_S, phase_fraction, project
+from jaxcnc.planners.pulsed import bang
+from jaxcnc.planners.pulsed.bang import EPS_MM_S, LENS_Q, phase_fraction, project
 from jaxcnc.planners.pulsed.windows import PulseWindow, snap_up_ticks
 
 #: Gaps on each side of a window's centre.
@@ -37,7 +38,7 @@ CENTRE_BELOW = (0, 8, 24)
 #: The neighbours' candidates (ticks per period, relative to the plan's count, within its period range).
 NEIGHBOUR_STEPS = (0, 8, 16, -8)
 #: Ramp fractions ``q`` tried at a window's centre (besides its own): ½ two halves, less a cruise between.
-Q_CHOICES = (0.5, 0.375, 0.25, 0.1875, 0.125)
+Q_CHOICES = (LENS_Q, 0.5, 0.375, 0.25, 0.1875, 0.125)
 
 
 def _centre_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow) -> np.ndarray:
@@ -63,34 +64,40 @@ def _neighbour_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWind
     return np.maximum(out, first[:, None])
 
 
-def _combos(cands: list[np.ndarray]) -> np.ndarray:
-    """All combinations ``(w, P, k)`` of per-gap candidates ``[(w, C_j)]``."""
-    w = cands[0].shape[0]
-    grids = np.meshgrid(*[np.arange(c.shape[1]) for c in cands], indexing="ij")
-    idx = [gr.reshape(-1) for gr in grids]
-    return np.stack([c[:, i] for c, i in zip(cands, idx, strict=True)], axis=2).reshape(w, -1, len(cands))
+def _forward(v_in, D, tk, qk, capm, capk, A, f):
+    """Speed intervals through a window, every combination of candidates, expanded gap by gap.
 
-
-def _forward(v_in, D, ticks, q, capm, capk, A, f):
-    """Speed intervals at each knot of a window ``(w, P, k+1, 3)`` from the pinned ``v_in`` ``(w, 3)``.
-
-    ``D`` ``(w, k, 3)``, ``ticks`` and ``q`` ``(w, P, k)``, ``capm`` ``(w, k, 3)``, ``capk`` ``(w, k+1, 3)``.
-    Returns ``(ok (w, P), lo, hi)``.
+    ``v_in`` ``(w, 3)`` the pinned entry; per gap ``j``: ``tk[j]``, ``qk[j]`` ``(w, C_j)`` its candidate
+    counts and ramp fractions, ``D`` ``(w, k, 3)``, ``capm`` ``(w, k, 3)``, ``capk`` ``(w, k+1, 3)``. After
+    gap ``j`` the combinations of gaps ``0..j`` are ``P_j = C_0 … C_j`` (C order). Returns ``(ok (w, P),
+    total (w, P) ticks, los, his)``, ``los[j]`` ``(w, P_{j-1}, 3)`` the interval at knot ``j`` (``j >= 1``).
     """
-    P, k = ticks.shape[1], ticks.shape[2]
-    lo = np.broadcast_to(v_in[:, None], (v_in.shape[0], P, 3))
-    hi = lo
-    ok = np.ones(ticks.shape[:2], bool)
+    w = v_in.shape[0]
+    lo = hi = v_in[:, None]
+    ok = np.ones((w, 1), bool)
+    total = np.zeros((w, 1), np.int64)
     los, his = [lo], [hi]
-    for j in range(k):  # the window's few gaps, each batched over windows and combinations
-        h = ticks[:, :, j, None] / f
+    for j in range(len(tk)):  # the window's few gaps, each batched over windows and combinations
+        C = tk[j].shape[1]
+        h = tk[j][:, None, :, None] / f  # (w, 1, C, 1)
         okj, lo, hi = project(
-            lo, hi, D[:, None, j], h, A, capm[:, None, j], capk[:, None, j + 1], q[:, :, j, None], xp=np
+            lo[:, :, None],
+            hi[:, :, None],
+            D[:, None, None, j],
+            h,
+            A,
+            capm[:, None, None, j],
+            capk[:, None, None, j + 1],
+            qk[j][:, None, :, None],
+            xp=np,
         )
-        ok &= np.all(okj, axis=-1)
+        P = lo.shape[1] * C
+        lo, hi = lo.reshape(w, P, 3), hi.reshape(w, P, 3)
+        ok = (ok[:, :, None] & np.all(okj, axis=-1)).reshape(w, P)
+        total = (total[:, :, None] + tk[j][:, None, :]).reshape(w, P)
         los.append(lo)
         his.append(hi)
-    return ok, np.stack(los, axis=2), np.stack(his, axis=2)
+    return ok, total, los, his
 
 
 #: Windows solved at once (bounds the memory of the combinations).
@@ -120,22 +127,31 @@ def polish(D, ticks, v, cruise, capm, capk, first, A, f, window: PulseWindow, ha
             m = snap_up_ticks(ticks, n_min, n_max, idle)[1]
             centre = np.flatnonzero((m > m0) & (np.arange(g) % K == r))
             centre = centre[(centre >= half) & (centre + half < g)]
-            for part in np.array_split(centre, max(1, -(-centre.size // CHUNK))):
-                if part.size:
-                    _windows(part, half, D, ticks, v, q, capm, capk, first, A, f, window)
+            jumps = q[centre] < 0.5  # cruising jumps try ramp fractions too: their own batches
+            for group in (centre[jumps], centre[~jumps]):
+                for part in np.array_split(group, max(1, -(-group.size // CHUNK))):
+                    if part.size:
+                        _windows(part, half, D, ticks, v, q, capm, capk, first, A, f, window)
     return ticks, v, q
 
 
-def _windows(centre, half, D, ticks, v, q, capm, capk, first, A, f, window) -> None:
-    """Solve the disjoint windows around ``centre`` ``(w,)``; ``ticks``, ``v``, ``q`` updated in place."""
+def _windows(centre, half, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
+    """Solve the disjoint windows around ``centre`` ``(w,)``; ``ticks``, ``v``, ``q_out`` updated in place."""
     K = 2 * half + 1
+    q = q_out
     gaps = centre[:, None] + np.arange(-half, half + 1)[None]  # (w, K)
+    if bang.LENS:  # two-phase gaps of the window move in the whole lens (it holds the ½–½ polygon's motions)
+        q = q.copy()
+        q[gaps] = np.where(q[gaps] == 0.5, LENS_Q, q[gaps])
     tk, qk = [], []
     for j in range(K):
         gj = gaps[:, j]
         if j == half:
             c = _centre_candidates(ticks[gj], first[gj], window)
-            qs = np.concatenate([q[gj, None], np.broadcast_to(np.array(Q_CHOICES), (gj.size, len(Q_CHOICES)))], 1)
+            if np.any(q[gj] < 0.5):  # jumps that cruise: their ramp fraction is chosen with the counts
+                qs = np.concatenate([q[gj, None], np.broadcast_to(np.array(Q_CHOICES), (gj.size, len(Q_CHOICES)))], 1)
+            else:  # two-phase gaps move in the whole lens, which holds every two-phase motion
+                qs = q[gj, None]
             tk.append(np.repeat(c, qs.shape[1], axis=1))
             qk.append(np.tile(qs, (1, c.shape[1])))
         elif abs(j - half) == 1:
@@ -145,28 +161,27 @@ def _windows(centre, half, D, ticks, v, q, capm, capk, first, A, f, window) -> N
         else:
             tk.append(ticks[gj][:, None])
             qk.append(q[gj][:, None])
-    sel = _combos([np.arange(t.shape[1])[None].repeat(len(centre), 0) for t in tk])  # (w, P, K) indices
-    rows = np.arange(len(centre))[:, None]
-    combo = np.stack([tk[j][rows, sel[:, :, j]] for j in range(K)], axis=2)
-    qq = np.stack([qk[j][rows, sel[:, :, j]] for j in range(K)], axis=2)
     Dw, cmw = D[gaps], capm[gaps]
     ckw = capk[np.concatenate([gaps, gaps[:, -1:] + 1], axis=1)]
     v_in, v_out = v[gaps[:, 0]], v[gaps[:, -1] + 1]
-    ok, lo, hi = _forward(v_in, Dw, combo, qq, cmw, ckw, A, f)
+    ok, total, los, his = _forward(v_in, Dw, tk, qk, cmw, ckw, A, f)
     tol = EPS_MM_S * (1 + np.abs(v_out[:, None]))
-    ok &= np.all((lo[:, :, -1] <= v_out[:, None] + tol) & (hi[:, :, -1] >= v_out[:, None] - tol), axis=-1)
-    total = np.where(ok, combo.sum(axis=2), np.iinfo(np.int64).max)
+    ok &= np.all((los[-1] <= v_out[:, None] + tol) & (his[-1] >= v_out[:, None] - tol), axis=-1)
+    total = np.where(ok, total, np.iinfo(np.int64).max)
     best = np.argmin(total, axis=1)
     gain = total[np.arange(len(centre)), best] < ticks[gaps].sum(axis=1)
     if not np.any(gain):
         return
     w = np.flatnonzero(gain)
-    pick = best[w]
-    new, newq = combo[w, pick], qq[w, pick]  # (w', K)
-    flo, fhi = lo[w, pick], hi[w, pick]  # (w', K+1, 3)
+    idx = np.unravel_index(best[w], [t.shape[1] for t in tk])  # each gap's candidate, C order
+    new = np.stack([tk[j][w, idx[j]] for j in range(K)], axis=1)  # (w', K)
+    newq = np.stack([qk[j][w, idx[j]] for j in range(K)], axis=1)
+    sizes = np.cumprod([t.shape[1] for t in tk])
+    flo = np.stack([los[j][w, best[w] // (sizes[-1] // sizes[j - 1]) if j else 0] for j in range(K + 1)], axis=1)
+    fhi = np.stack([his[j][w, best[w] // (sizes[-1] // sizes[j - 1]) if j else 0] for j in range(K + 1)], axis=1)
     vw = _pick_back(v_out[w], Dw[w], new, newq, cmw[w], ckw[w], flo, fhi, v[gaps[w]], A, f)
     ticks[gaps[w]] = new
-    q[gaps[w]] = newq
+    q_out[gaps[w]] = newq
     v[gaps[w, 1:]] = vw[:, 1:]
 
 
