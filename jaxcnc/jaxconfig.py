@@ -66,3 +66,9 @@ def on_cpu() -> bool:
 
 
 __all__ = ["configure_jax", "jax", "on_cpu", "planning_device"]
+
+
+# the planning process's C heap (glibc): at most two malloc arenas (see jaxcnc.memory)
+from jaxcnc.memory import limit_arenas  # noqa: E402
+
+limit_arenas()

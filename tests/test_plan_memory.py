@@ -152,3 +152,18 @@ def test_grid_rows_are_the_grids_rows_in_any_block_of_spans():
     parts = [_grid_rows(spans.length, counts, a, b) for a, b in ((0, 17), (17, 18), (18, 260), (260, len(spans)))]
     for whole, piece in zip((grid.span, grid.s_start, grid.delta), zip(*parts, strict=True), strict=True):
         assert np.array_equal(np.concatenate(piece).view(np.int64), whole.view(np.int64))
+
+
+def test_arena_limit_applies_on_glibc_only_and_leaves_the_users_setting(monkeypatch):
+    import os
+
+    from jaxcnc.memory import limit_arenas
+
+    monkeypatch.setenv("MALLOC_ARENA_MAX", "4")
+    assert limit_arenas() is False  # the user's choice stands
+    monkeypatch.delenv("MALLOC_ARENA_MAX")
+    try:
+        glibc = (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc")
+    except (AttributeError, ValueError):  # no confstr or no such name: not glibc
+        glibc = False
+    assert limit_arenas() is glibc

@@ -337,14 +337,16 @@ def plan_topp(req: PlanRequest) -> Plan:
         return plan_lookahead(req)
     n = len(spans)
     counts = hold_counts(req, interval_counts(spans))
-    facts = _ProgramFacts.of(req)
     capacity = int(counts.sum())
     large = bucket_size(capacity) >= TRIM_SEGMENTS  # where handing free memory back is worth its CPU
+    if large:
+        release_free_heap()  # what building the spans left (and a plan made before and freed)
+    facts = _ProgramFacts.of(req)
     # large plans derive where the segments lie from the counts (refined in place) rather than store it
     segments = _SegmentTable(capacity, *((spans.length, counts) if large else ()))
     segments.prepare(req.machine.tick_hz)
     if large:
-        release_free_heap()  # what building the spans, the junctions and the alignment's compile left
+        release_free_heap()  # what the junctions and the alignment's compile left
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
     while first < n:
         reach = np.cumsum(counts[first:])
