@@ -229,10 +229,10 @@ def _window(name: str, n: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", ["short-rows", "text"])
-def test_polish_never_longer_verified_and_not_below_the_window_optimum(name, monkeypatch):
+def test_polish_shorter_verified_and_within_a_percent_of_the_window_optimum(name, monkeypatch):
     """The polish (windows re-timed between pinned knot velocities) never lengthens the plan, its table is
-    verified at every tick, and it stays at or above the optimum of the window at rest (the LP's motion
-    model contains bang's)."""
+    verified at every tick, it stays above the certified bound and within 1 % of the window optimum at rest
+    (the LP's 4-step model; the lens lies partly outside it, so ``bang`` may also end below it)."""
     from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
     from jaxcnc.planners.pulsed import bang, pulse_window
     from jaxcnc.planners.pulsed.bound import lower_bound_travel
@@ -251,9 +251,8 @@ def test_polish_never_longer_verified_and_not_below_the_window_optimum(name, mon
     lb = lower_bound_travel(pts, win, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid)
     caps = {"feed_mm_s": with_margin(GLASS.path.feed), "rapid_mm_s": with_margin(GLASS.path.rapid)}
     opt = optimum_window(pts, win, Vr, Ar, lb.gap_ticks, start_ticks=ticks, rest_ends=True, max_seconds=60, **caps)
-    assert opt.ticks.sum() <= ticks.sum()
-    if opt.proven:
-        assert opt.lower_ticks <= ticks.sum()
+    assert lb.gap_ticks.sum() <= ticks.sum() <= 1.01 * opt.ticks.sum()
+    assert ticks.sum() < np.diff(before.work_tick).sum()  # the polish gains on both windows
 
 
 def test_polish_windows_keep_every_gap_in_the_model():

@@ -37,6 +37,10 @@ CENTRE_DROPS = (1, 2, 3)
 CENTRE_BELOW = (0, 8, 24)
 #: The neighbours' candidates (ticks per period, relative to the plan's count, within its period range).
 NEIGHBOUR_STEPS = (0, 8, 16, -8)
+#: ... and one period more (ticks per period above that range's shortest): an idle pulse moved off the centre.
+NEIGHBOUR_UP = (0, 12)
+#: ... and the longest counts of one and two periods fewer (two jumps either side of a short gap).
+NEIGHBOUR_DROPS = (1, 2)
 #: Ramp fractions ``q`` tried at a window's centre (besides its own): ½ two halves, less a cruise between.
 Q_CHOICES = (LENS_Q, 0.5, 0.375, 0.25, 0.1875, 0.125)
 
@@ -56,12 +60,15 @@ def _centre_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow)
 
 
 def _neighbour_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow) -> np.ndarray:
-    """Candidate counts ``(w, C)`` for a centre's neighbours: the plan's and a few ticks either side in its range."""
+    """Candidate counts ``(w, C)`` for a centre's neighbours: the plan's, a few ticks either side in its range,
+    and the shortest of the next range (and a little above it)."""
     n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
     m = snap_up_ticks(prev, n_min, n_max, idle)[1]
     steps = np.array(NEIGHBOUR_STEPS)[None] * m[:, None]
     out = np.clip(prev[:, None] + steps, (m * n_min)[:, None], (m * n_max)[:, None])
-    return np.maximum(out, first[:, None])
+    up = ((m + 1) * n_min)[:, None] + np.array(NEIGHBOUR_UP)[None] * (m + 1)[:, None]  # one period more
+    down = np.maximum(m[:, None] - np.array(NEIGHBOUR_DROPS)[None], 1) * n_max  # a neighbour that is a jump too
+    return snap_up_ticks(np.maximum(np.concatenate([out, up, down], axis=1), first[:, None]), n_min, n_max, idle)[0]
 
 
 def _forward(v_in, D, tk, qk, capm, capk, A, f):
