@@ -7,14 +7,18 @@ fixed, and only ever shorten a gap. On 40-point windows of the short-rows and te
 - a **jump** (0.5–12 mm) takes one or more periods fewer, while the row gaps around it set up the speed
   differently (the sweeps offer one period fewer per sweep and the neighbours' sets are those of the plan);
 - a **row change** (a step across and a reversal) takes one period instead of two, the next gap being
-  *lengthened* within its period range (238 → 259 ticks): a few ticks spent to save a period.
+  *lengthened* within its period range (238 → 259 ticks): a few ticks spent to save a period;
+- and the optimum's ticks are not feasible in the ½–½ profile at all: its row gaps next to a jump gain or
+  shed more speed than the rhombus allows, which the lens does.
 
 Here every gap whose period count is above its shortest is the centre of a window of ``2 half + 1`` gaps;
 the velocities at the window's two end knots are pinned to the plan's, so windows are independent (the
 plan outside is untouched, its knots keep their speeds) and every window is solved at once (NumPy, batched,
 no loop over gaps). Inside, every combination of a few candidate counts per gap (the centre: its count and
-the tops of the one to three period ranges below it; its neighbours: their count and a few ticks longer or
-shorter within their range; the outer gaps: their count) is checked exactly in ``bang``'s motion model by
+the tops of the one to three period ranges below it; its neighbours: their count, a few ticks longer or
+shorter within their range, one period more, and — jumps themselves — one or two periods fewer; the outer
+gaps: their count; a cruising centre also its ramp fraction ``q`` or the lens) is checked exactly in
+``bang``'s motion model, every two-phase gap of the window in the lens (:func:`~.bang.lens_project`), by
 propagating the speed intervals from the pinned entry velocity (:func:`~.bang.project`) and testing that
 the pinned exit velocity is reachable; the feasible combination with the least total is kept when it is
 shorter than the plan's, and the interior knot velocities are picked backwards from the pinned exit inside
