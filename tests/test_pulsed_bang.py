@@ -295,3 +295,23 @@ def test_polish_windows_keep_every_gap_in_the_model():
     cap = capm[np.searchsorted(work, starts, side="right") - 1]
     assert np.all(np.abs(c[:, 1]) <= cap + 1e-7) and np.all(np.abs(end_vel) <= cap + 1e-7)
     assert np.all(np.abs(v2) <= capk + 1e-7)
+
+
+@pytest.mark.parametrize("eps", [0.0, 1e-13, 1e-10, -1e-10, 1e-6])
+def test_lens_pieces_continuous_when_axes_switch_together(eps):
+    """A lens gap whose axes switch at (nearly) the same instant — slivers between the switches dropped — still
+    runs through its end point with its end velocity (the sparse cloud once had x's acceleration held past it)."""
+    from jaxcnc.planners.pulsed import bang
+
+    f, ticks = 1e4, np.array([254])
+    v = np.array([[29.9997, 0.0, 0.0], [29.9997 + eps, 0.0, 0.0]])  # x switches at h/2 (+ a sliver), y and z at h/2
+    D = np.array([[0.7, 0.0, 0.0]])
+    pts = np.array([[48.3549, 55.1875, 20.125]])
+    pts = np.vstack([pts, pts + D])
+    work = np.array([1000, 1000 + ticks[0]])
+    starts, c = bang.gap_pieces(pts, D, ticks, v, np.array([bang.LENS_Q]), work, f)
+    ends = np.append(starts[1:], work[-1])
+    tau = ((ends - starts) / f)[:, None]
+    end_pos, end_vel = c[:, 0] + c[:, 1] * tau + c[:, 2] * tau**2, c[:, 1] + 2 * c[:, 2] * tau
+    assert np.allclose(end_pos[-1], pts[1], atol=1e-9) and np.allclose(end_vel[-1], v[1], atol=1e-6)
+    assert np.allclose(end_pos[:-1], c[1:, 0], atol=1e-9) and np.allclose(end_vel[:-1], c[1:, 1], atol=1e-6)

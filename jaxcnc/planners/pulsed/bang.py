@@ -669,9 +669,11 @@ def _lens_pieces(pts, D, ticks, v, work, f, idx):
     c = np.zeros((g, 4, 4, 3))
     c[:, :, 0] = pts[:-1][idx][:, None] + V0 * d1 + 0.5 * A1 * d1 * d1 + u1 * d2 + 0.5 * A3 * d2 * d2
     c[:, :, 1] = u1 + A3 * d2
-    end = np.concatenate([at[:, 1:], h], axis=1)[:, :, None]
-    c[:, :, 2] = 0.5 * np.where(0.5 * (tau + end) < T, A1, A3)
     keep = np.concatenate([np.ones((g, 1), bool), (np.diff(at, axis=1) > sliver) & (at[:, 1:] < h - sliver)], 1)
+    # each kept piece runs to the next kept start (over the slivers): its accelerations are those at its middle
+    later = np.concatenate([np.where(keep, at, h)[:, 1:], h], axis=1)
+    end = np.minimum.accumulate(later[:, ::-1], axis=1)[:, ::-1][:, :, None]
+    c[:, :, 2] = 0.5 * np.where(0.5 * (tau + end) < T, A1, A3)
     starts = work[:-1][idx][:, None] + at * f
     return starts[keep], c[keep], np.repeat(idx[:, None], 4, axis=1)[keep]
 
