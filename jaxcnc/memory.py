@@ -4,9 +4,10 @@ A plan of a million blocks frees and allocates arrays of hundreds of megabytes i
 from XLA's worker threads alike. glibc gives each thread that meets a locked heap an arena of its own (up
 to eight per core), and memory freed into one arena serves only that arena's next allocations: the pages
 stay resident, spread over the arenas. :func:`limit_arenas` caps the arenas at two (``mallopt(M_ARENA_MAX)``)
-once, when the planning side is imported (:mod:`jaxcnc.jaxconfig`; set later, once the arenas exist, it does
-not help): 1 M blocks with exact corners, peak resident 957-1018 -> 938-945 MB; CPU within the process-to-process
-spread, though a 100k-block plan more often runs in its page-faulting mode (docs/planning.md, "Memory").
+once, by the planning entry points (:func:`jaxcnc.jaxconfig.configure_jax`, called first by the ``jaxcnc``
+commands and the jobs API; importing does nothing; set later, once the arenas exist, it does not help):
+1 M blocks with exact corners, peak resident 957-1018 -> 938-945 MB; CPU within the process-to-process spread,
+though a 100k-block plan more often runs in its page-faulting mode (docs/planning.md, "Memory").
 ``MALLOC_ARENA_MAX`` in the environment, if set, is the user's choice and is left as it is.
 
 Measured and not done: fixing glibc's mmap threshold (``M_MMAP_THRESHOLD``, so that large arrays are unmapped
