@@ -72,14 +72,15 @@ def test_importing_the_planning_stack_writes_nothing(tmp_path):
 
 
 def test_planners_run_on_the_host_cpu_device():
-    """``plan_job`` runs the planner with the host CPU as JAX's default device (jaxconfig: the sequential
-    passes are latency-bound; on a GPU they took 30–40× the CPU's time), and the look-ahead pass picks its
-    sequential form there; outside, the default is left as it was."""
+    """``plan_job`` runs the planner on the host CPU (jaxconfig: the sequential passes are latency-bound; on a GPU
+    they took 30–40× the CPU's time): with a GPU the default, inside ``jax.default_device(cpu)``; where the default
+    is the CPU already, without any context (threads would not inherit it and compile every program again). Here
+    a non-CPU default is stood in for by the default device set to a string the scope must replace."""
     import jax
 
     from jaxcnc.bench.plan import bench_machine
     from jaxcnc.bench.programs import cam_polyline
-    from jaxcnc.jaxconfig import on_cpu, planning_device
+    from jaxcnc.jaxconfig import on_cpu, planning_device, planning_scope
     from jaxcnc.machine import parse_machine
     from jaxcnc.planners import Planner, get_planner, plan_job
 
@@ -94,8 +95,11 @@ def test_planners_run_on_the_host_cpu_device():
             return get_planner("topp").plan(request)
 
     assert planning_device().platform == "cpu"
+    machine = parse_machine(bench_machine(0.01), "<test>")
     before = jax.config.jax_default_device
-    job = plan_job(cam_polyline(30), parse_machine(bench_machine(0.01), "<test>"), Recording())
-    assert seen == {"device": planning_device(), "on_cpu": True}
-    assert jax.config.jax_default_device is before
+    job = plan_job(cam_polyline(30), machine, Recording())
+    assert seen == {"device": before, "on_cpu": True} and jax.config.jax_default_device is before
     assert job.plan.total_time_s > 0
+    with jax.default_device("cpu"):  # a default set by the caller: the scope sets the planning device
+        with planning_scope():
+            assert jax.config.jax_default_device == planning_device() and on_cpu()

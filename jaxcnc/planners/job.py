@@ -9,13 +9,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-import jax
 import numpy as np
 
 from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
-from jaxcnc.jaxconfig import planning_device
+from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, request_limits
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
@@ -123,7 +122,7 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     v_max, a_max, j_max = request_limits(machine)  # the machine's limits less the margin, applied here once
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)
     try:
-        with jax.default_device(planning_device()):  # sequential passes: on the host CPU (see jaxconfig)
+        with planning_scope():  # sequential passes: on the host CPU (see jaxconfig)
             if np.any(np.isfinite(j_max)) and not chosen.handles_jerk:
                 plan = jerk_limited(request, chosen)  # jerk limits: the planner's time law averaged (an S-curve)
             else:

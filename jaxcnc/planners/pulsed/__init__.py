@@ -19,11 +19,10 @@ import time
 from dataclasses import dataclass
 from functools import cached_property
 
-import jax
 import numpy as np
 
 from jaxcnc.errors import SourceError
-from jaxcnc.jaxconfig import planning_device
+from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import outside_travel
 from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
@@ -129,7 +128,7 @@ def plan_points(job: PointJob, machine: MachineConfig, planner: str = DEFAULT_PU
     """Plan a point job on a pulsed machine with the named pulse planner."""
     t0 = time.perf_counter()
     req = pulse_request(job, machine)
-    with jax.default_device(planning_device()):  # sequential sweeps: on the host CPU (see jaxconfig)
+    with planning_scope():  # sequential sweeps: on the host CPU (see jaxconfig)
         plan = get_pulse_planner(planner)(req)
     _check_travel(plan, machine, job)
     return PlannedPoints(job=job, plan=plan, machine=machine, window=req.window, plan_wall_s=time.perf_counter() - t0)

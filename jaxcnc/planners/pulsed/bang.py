@@ -615,7 +615,13 @@ def _precompile(size: int, n_first: int, A: np.ndarray, f: float) -> list[Future
         (reachable, (gaps[0], ticks, *gaps[2:], A, f)),
         (backward, (gaps[0], ticks, *gaps[2:], knots, knots, A, f)),
     ]
-    return [_COMPILER.submit(lambda fn=fn, args=args: fn.lower(*args).compile()) for fn, args in jobs]
+    device = jax.config.jax_default_device  # the caller's (planning_scope): threads do not inherit it
+
+    def compile_one(fn, args):
+        with jax.default_device(device):
+            return fn.lower(*args).compile()
+
+    return [_COMPILER.submit(compile_one, fn, args) for fn, args in jobs]
 
 
 def gap_pieces(pts, D, ticks, v, cruise, work, f):
