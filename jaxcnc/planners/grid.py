@@ -170,6 +170,22 @@ def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) 
     return tuple(np.asarray(x)[:q] for x in _boxes(arrays, which, a, d))
 
 
+def cut_spans(
+    span_length: np.ndarray, counts: np.ndarray, first: int, last: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(span, s_start, s_end)`` ``(m,)`` of spans ``first..last-1`` cut into ``counts[k]`` equal intervals each
+    (``counts`` and ``span_length`` over all spans). Elementwise, so any block of spans gives the same bits as
+    the whole; a span's last interval ends at its length exactly."""
+    counts = counts[first:last]
+    span = np.repeat(np.arange(first, last), counts)
+    j = np.arange(span.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    local = span - first
+    step = span_length[first:last] / counts
+    s_start = j * step[local]
+    s_end = np.where(j == counts[local] - 1, span_length[span], (j + 1) * step[local])
+    return span, s_start, s_end
+
+
 def build_grid(
     spans: Spans, counts: np.ndarray, arrays: dict | None = None, first: int = 0, last: int | None = None
 ) -> Grid:
@@ -180,14 +196,8 @@ def build_grid(
     already (row 0 is span ``first``).
     """
     last = len(spans) if last is None else last
-    counts = counts[first:last]
-    span = np.repeat(np.arange(first, last), counts)
-    j = np.arange(span.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    span, s_start, s_end = cut_spans(spans.length, counts, first, last)
     local = span - first
-    step = spans.length[first:last] / counts
-    s_start = j * step[local]
-    at_end = j == counts[local] - 1
-    s_end = np.where(at_end, spans.length[span], (j + 1) * step[local])  # the span's end exactly
     delta = s_end - s_start
     curved = is_curved(spans.kind[span])
     boxed = spans.kind[span] == SpanKind.BLEND

@@ -35,6 +35,7 @@ from jaxcnc.planners.grid import (
     GRID_MARGIN,
     Grid,
     build_grid,
+    cut_spans,
     device_spans,
     frames_at,
     interval_counts,
@@ -598,16 +599,9 @@ _WHERE_BLOCK = 1 << 16
 
 
 def _grid_rows(span_length: np.ndarray, counts: np.ndarray, first: int, last: int) -> tuple[np.ndarray, ...]:
-    """``(span, s_start, delta)`` of spans ``first..last-1`` cut into ``counts[k]`` equal intervals each: the
-    arithmetic of :func:`~jaxcnc.planners.grid.build_grid` (elementwise, so any block of spans gives the same
-    bits; :meth:`_SegmentTable.append` checks every window against it)."""
-    counts = counts[first:last]
-    span = np.repeat(np.arange(first, last), counts)
-    j = np.arange(span.size) - np.repeat(np.cumsum(counts) - counts, counts)
-    local = span - first
-    step = span_length[first:last] / counts
-    s_start = j * step[local]
-    s_end = np.where(j == counts[local] - 1, span_length[span], (j + 1) * step[local])
+    """``(span, s_start, delta)`` of spans ``first..last-1`` as :func:`~jaxcnc.planners.grid.build_grid` cuts
+    them (:func:`~jaxcnc.planners.grid.cut_spans`; :meth:`_SegmentTable.append` checks every window against it)."""
+    span, s_start, s_end = cut_spans(span_length, counts, first, last)
     return span, s_start, s_end - s_start
 
 
