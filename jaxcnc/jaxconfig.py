@@ -12,7 +12,7 @@ entry points (:mod:`jaxcnc.jobs`, ``jaxcnc`` commands, benchmarks), not by impor
 most of the JIT compile. ``JAXCNC_CACHE_DIR=""`` disables it; a cache directory the process already set
 is kept.
 
-Planning runs on the host CPU whatever the default backend (:func:`planning_device`): its passes are
+Planning runs on the host CPU whatever the default backend (:func:`planning_scope`): its passes are
 sequential scans over the intervals, latency-bound, and a GPU pays a kernel launch and a host round trip
 for every loop iteration. Measured on an H100 beside its own 16-core CPU (``benchmarks/gpu_vs_cpu.py``,
 2026-11-23): a 10k-block contour planned in 0.81 s on the GPU against 0.024 s on the CPU; unrolling the

@@ -155,8 +155,6 @@ def _rows(D, h, A, cap_mid, cap_knot, cruise, xp=jnp):
 #: instead of a polygon; the polish (:mod:`.polish`) gives it to the gaps of its windows, the sweeps keep the
 #: polygons (booleans: ``q`` ¼ or ½).
 LENS_Q = 1.0
-#: ``False``: no lens anywhere (the polish keeps the polygons).
-LENS = True
 
 
 def is_lens(cruise, xp=jnp):

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxcnc.planners.pulsed import bang
 from jaxcnc.planners.pulsed.bang import EPS_MM_S, LENS_Q, phase_fraction, project
 from jaxcnc.planners.pulsed.windows import PulseWindow, snap_up_ticks
 
@@ -149,11 +148,9 @@ def polish(D, ticks, v, cruise, capm, capk, first, A, f, window: PulseWindow, ha
 def _windows(centre, half, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
     """Solve the disjoint windows around ``centre`` ``(w,)``; ``ticks``, ``v``, ``q_out`` updated in place."""
     K = 2 * half + 1
-    q = q_out
     gaps = centre[:, None] + np.arange(-half, half + 1)[None]  # (w, K)
-    if bang.LENS:  # two-phase gaps of the window move in the whole lens (it holds the ½–½ polygon's motions)
-        q = q.copy()
-        q[gaps] = np.where(q[gaps] == 0.5, LENS_Q, q[gaps])
+    q = q_out.copy()  # two-phase gaps of the window move in the whole lens (it holds the ½–½ polygon's motions)
+    q[gaps] = np.where(q[gaps] == 0.5, LENS_Q, q[gaps])
     tk, qk = [], []
     for j in range(K):
         gj = gaps[:, j]
