@@ -167,3 +167,21 @@ def test_arena_limit_applies_on_glibc_only_and_leaves_the_users_setting(monkeypa
     except (AttributeError, ValueError):  # no confstr or no such name: not glibc
         glibc = False
     assert limit_arenas() is glibc
+
+
+def test_heap_thresholds_apply_on_glibc_only_and_leave_the_users_setting(monkeypatch):
+    import os
+
+    from jaxcnc.memory import fix_thresholds, tune_heap
+
+    for key in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES"):
+        monkeypatch.setenv(key, "1")
+        assert fix_thresholds() is False  # the user's choice stands
+        monkeypatch.delenv(key)
+    try:
+        glibc = (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc")
+    except (AttributeError, ValueError):
+        glibc = False
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    assert fix_thresholds() is glibc
+    assert tune_heap() is glibc

@@ -44,8 +44,11 @@ import numpy as np
 def rss():
     st = dict(l.split(':', 1) for l in open('/proc/self/status'))
     return int(st['VmRSS'].split()[0]) / 1024, int(st['VmHWM'].split()[0]) / 1024
-from jaxcnc.memory import limit_arenas
-limit_arenas()  # as the jaxcnc commands do first (jaxconfig.configure_jax), without the compile cache
+try:  # as the jaxcnc commands do first (jaxconfig.configure_jax), without the compile cache
+    from jaxcnc.memory import tune_heap
+except ImportError:  # a baseline revision before it
+    from jaxcnc.memory import limit_arenas as tune_heap
+tune_heap()
 from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job
 from jaxcnc.program import program_from_columns
