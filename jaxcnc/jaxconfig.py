@@ -32,14 +32,14 @@ jax.config.update("jax_enable_x64", True)
 
 
 def configure_jax(cache_dir: str | None = None) -> str | None:
-    """Float64 on, the planning process's C heap capped at two malloc arenas (:func:`jaxcnc.memory.limit_arenas`:
-    it only helps before JAX starts its threads, so entry points call this first), and the persistent compile
-    cache in ``cache_dir`` (default ``$JAXCNC_CACHE_DIR`` or ``~/.cache/jaxcnc/jax``; ``""`` for none).
-    Idempotent; returns the cache directory in use, if any."""
-    from jaxcnc.memory import limit_arenas
+    """Float64 on, the planning process's C heap tuned (:func:`jaxcnc.memory.tune_heap`: two malloc arenas, which
+    only helps before JAX starts its threads, so entry points call this first; fixed thresholds), and the
+    persistent compile cache in ``cache_dir`` (default ``$JAXCNC_CACHE_DIR`` or ``~/.cache/jaxcnc/jax``; ``""``
+    for none). Idempotent; returns the cache directory in use, if any."""
+    from jaxcnc.memory import tune_heap
 
     jax.config.update("jax_enable_x64", True)
-    limit_arenas()
+    tune_heap()
     if jax.config.jax_compilation_cache_dir is not None:
         return jax.config.jax_compilation_cache_dir
     if cache_dir is None:
