@@ -573,7 +573,7 @@ def recap(v: np.ndarray, direction: np.ndarray, path_mm_s: float, v_max: np.ndar
 
 
 #: Rounds of :func:`~.polish.polish` (windows re-timed jointly between pinned knot velocities) after the sweeps.
-POLISH_ROUNDS = 1
+POLISH_ROUNDS = 2
 
 _COMPILER = ThreadPoolExecutor(max_workers=2, thread_name_prefix="bang-compile")
 

@@ -38,10 +38,12 @@ HALF = 2
 #: The centre's candidates: one to three period ranges fewer (each range's longest count and a few below it).
 CENTRE_DROPS = (1, 2, 3)
 CENTRE_BELOW = (0, 8, 24)
+#: ... and its own period count a few ticks per period shorter (long jumps end a few ticks per period long).
+CENTRE_SHORTER = (4, 8, 16)
 #: The neighbours' candidates (ticks per period, relative to the plan's count, within its period range).
 NEIGHBOUR_STEPS = (0, 8, 16, -8)
 #: ... and one period more (ticks per period above that range's shortest): an idle pulse moved off the centre.
-NEIGHBOUR_UP = (0, 12)
+NEIGHBOUR_UP = (0, 12, 24)
 #: ... and the longest counts of one and two periods fewer (two jumps either side of a short gap).
 NEIGHBOUR_DROPS = (1, 2)
 #: Ramp fractions ``q`` tried at a window's centre (besides its own): ½ two halves, less a cruise between.
@@ -52,7 +54,7 @@ def _centre_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow)
     """Candidate counts ``(w, C)`` for window centres: the plan's, and the tops of lower period ranges."""
     n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
     m = snap_up_ticks(prev, n_min, n_max, idle)[1]
-    cols = [prev]
+    cols = [prev] + [np.maximum(prev - s * m, m * n_min) for s in CENTRE_SHORTER]
     for k in CENTRE_DROPS:
         mk = np.maximum(m - k, 1)
         for b in CENTRE_BELOW:
@@ -110,18 +112,76 @@ def _forward(v_in, D, tk, qk, capm, capk, A, f):
     return ok, total, los, his
 
 
-#: Windows solved at once (bounds the memory of the combinations).
-CHUNK = 256
+#: Combinations (windows × candidate combinations) solved at once: bounds the memory (~100 MB).
+COMBINATIONS = 1 << 19
 
 
-def polish(D, ticks, v, cruise, capm, capk, first, A, f, window: PulseWindow, half: int | None = None, rounds: int = 1):
+def _pair_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow) -> np.ndarray:
+    """Candidate counts ``(w, C)`` for the two centres of a pair window: the plan's, a few ticks per period
+    shorter within its range, the longest count of one period fewer (and a few below it), of two fewer."""
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m = snap_up_ticks(prev, n_min, n_max, idle)[1]
+    cols = [prev]
+    cols += [np.maximum(prev - s * m, m * n_min) for s in PAIR_SHORTER]
+    for k, below in PAIR_DROPS:
+        mk = np.maximum(m - k, 1)
+        cols.append(np.maximum(mk * n_max - below * mk, mk * n_min))
+    out = np.maximum(np.stack(cols, axis=1), first[:, None])
+    return snap_up_ticks(out, n_min, n_max, idle)[0]
+
+
+def _steps_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow, steps, up) -> np.ndarray:
+    """Candidate counts ``(w, C)``: the plan's moved by ``steps`` ticks per period within its range, and
+    ``up`` ticks per period above the shortest count of one period more."""
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m = snap_up_ticks(prev, n_min, n_max, idle)[1]
+    out = np.clip(prev[:, None] + np.array(steps)[None] * m[:, None], (m * n_min)[:, None], (m * n_max)[:, None])
+    if up:
+        more = ((m + 1) * n_min)[:, None] + np.array(up)[None] * (m + 1)[:, None]
+        out = np.concatenate([out, more], axis=1)
+    return snap_up_ticks(np.maximum(out, first[:, None]), n_min, n_max, idle)[0]
+
+
+#: Pair windows (two centres, :func:`polish`): each centre's counts a few ticks per period shorter within its
+#: range, and ``(k, b)``: the longest count of ``k`` periods fewer less ``b`` ticks per period.
+PAIR_SHORTER = (8, 16, 24)
+PAIR_DROPS = ((1, 0), (1, 8), (1, 24), (2, 0))
+#: ... a cruising centre's ramp fractions (besides its own).
+PAIR_Q = (0.375, 0.3125, 0.25)
+#: ... the gap between two centres: ticks per period longer within its range, and one period more.
+PAIR_MIDDLE_STEPS, PAIR_MIDDLE_UP = (0, 8, 16), (0, 12)
+#: ... the centres' outer neighbours.
+PAIR_OUTER_STEPS = (0, 8, -8)
+#: A single window's outer gaps (two-phase windows): their count and up to the top of its range (ticks per
+#: period above the plan's, within the range).
+OUTER_STEPS = (0, 24)
+#: Pair layouts: the second centre one gap after the first (adjacent) or two (a gap between them).
+PAIR_OFFSETS = (1, 2)
+
+
+def polish(
+    D,
+    ticks,
+    v,
+    cruise,
+    capm,
+    capk,
+    first,
+    A,
+    f,
+    window: PulseWindow,
+    half: int | None = None,
+    rounds: int = 1,
+    pairs: bool = True,
+):
     """Re-time windows of ``2 half + 1`` gaps jointly between pinned knot velocities (module docstring).
 
     ``D`` ``(g, 3)``, ``ticks`` ``(g,)`` the plan, ``v`` ``(g+1, 3)`` its knot velocities, ``cruise`` ``(g,)``
     (boolean, or each gap's ramp fraction ``q``), ``capm`` ``(g, 3)``, ``capk`` ``(g+1, 3)`` (the caps the
-    plan keeps), ``first`` ``(g,)`` each gap's shortest admissible count. Returns ``(ticks, v, q)``: never
-    longer in total than the plan, every gap feasible in ``bang``'s model with the returned velocities and
-    ramp fractions ``q`` ``(g,)``.
+    plan keeps), ``first`` ``(g,)`` each gap's shortest admissible count. ``rounds``: the later rounds only
+    where the round before changed the plan. ``pairs``: then windows with two centres (:func:`_pair_windows`),
+    once. Returns ``(ticks, v, q)``: never longer in total than the plan, every gap feasible in ``bang``'s
+    model with the returned velocities and ramp fractions ``q`` ``(g,)``.
     """
     ticks, v = ticks.copy(), v.copy()
     q = np.array(phase_fraction(cruise, np), dtype=np.float64)
@@ -132,61 +192,146 @@ def polish(D, ticks, v, cruise, capm, capk, first, A, f, window: PulseWindow, ha
     n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
     m0 = snap_up_ticks(first, n_min, n_max, idle)[1]
     capk = np.broadcast_to(capk, (g + 1, 3))
+    near = np.ones(g, bool)  # where a window may gain: everywhere, then around the last round's changes
+    args = (D, ticks, v, q, capm, capk, first, A, f, window)
     for _ in range(rounds):
+        before = ticks.copy()
         for r in range(K):
             m = snap_up_ticks(ticks, n_min, n_max, idle)[1]
-            centre = np.flatnonzero((m > m0) & (np.arange(g) % K == r))
+            centre = np.flatnonzero((m > m0) & (np.arange(g) % K == r) & near)
             centre = centre[(centre >= half) & (centre + half < g)]
             jumps = q[centre] < 0.5  # cruising jumps try ramp fractions too: their own batches
-            for group in (centre[jumps], centre[~jumps]):
-                for part in np.array_split(group, max(1, -(-group.size // CHUNK))):
-                    if part.size:
-                        _windows(part, half, D, ticks, v, q, capm, capk, first, A, f, window)
+            for group, roles in ((centre[jumps], _single_roles(half, "F")), (centre[~jumps], _single_roles(half))):
+                if group.size:
+                    _solve(group[:, None] + np.arange(-half, half + 1)[None], roles, *args)
+        changed = np.flatnonzero(ticks != before)
+        if changed.size == 0:
+            break
+        near = np.zeros(g, bool)
+        near[np.clip(changed[:, None] + np.arange(-K, K + 1)[None], 0, g - 1)] = True
+    if pairs:
+        _pair_windows(m0, *args)
     return ticks, v, q
 
 
-def _windows(centre, half, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
-    """Solve the disjoint windows around ``centre`` ``(w,)``; ``ticks``, ``v``, ``q_out`` updated in place."""
-    K = 2 * half + 1
-    gaps = centre[:, None] + np.arange(-half, half + 1)[None]  # (w, K)
+def _single_roles(half: int, outer: str = "E") -> tuple[str, ...]:
+    """A single-centre window's roles: the centre, its neighbours, the outer gaps ``outer`` (``E``: their
+    count or the top of its range — a row slowed before a reversal —, ``F``: fixed)."""
+    return tuple("C" if j == half else "N" if abs(j - half) == 1 else outer for j in range(2 * half + 1))
+
+
+def _pair_windows(m0, D, ticks, v, q, capm, capk, first, A, f, window) -> None:
+    """Windows with two centres (both above their shortest period count), re-timed jointly.
+
+    A move across two single windows' centres: two jumps either side of a short gap both shortened while the
+    gap between them takes an idle pulse (short rows: a one-point row between two 14 mm jumps), two adjacent
+    jumps shortened together (sparse chains). Layout: a fixed gap, the first centre's outer neighbour, the
+    centres (with the gap between them, if any), the second's outer neighbour, a fixed gap; updated in place.
+    """
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    g = ticks.shape[0]
+    for off in PAIR_OFFSETS:
+        roles = ("F", "O", "P") + ("M",) * (off - 1) + ("P", "O", "F")
+        K = len(roles)
+        for r in range(K):
+            m = snap_up_ticks(ticks, n_min, n_max, idle)[1]
+            above = m > m0
+            c1 = np.flatnonzero(above[: g - off] & above[off:] & (np.arange(g - off) % K == r))
+            c1 = c1[(c1 >= 2) & (c1 + off + 2 < g)]
+            cruising = (q[c1] < 0.5) | (q[c1 + off] < 0.5)  # ramp fractions tried: their own batches
+            for group in (c1[cruising], c1[~cruising]):
+                if group.size:
+                    gaps = group[:, None] + np.arange(-2, K - 2)[None]
+                    _solve(gaps, roles, D, ticks, v, q, capm, capk, first, A, f, window)
+
+
+def _solve(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
+    """Solve the disjoint windows ``gaps`` ``(w, K)`` in batches of at most :data:`COMBINATIONS` combinations."""
+    per = int(np.prod([_count(r) for r in roles], dtype=np.int64))
+    step = max(1, COMBINATIONS // per)
+    for i in range(0, gaps.shape[0], step):
+        _solve_batch(gaps[i : i + step], roles, D, ticks, v, q_out, capm, capk, first, A, f, window)
+
+
+def _count(role: str) -> int:
+    """An upper bound on the candidates of a gap of ``role`` (counts × ramp fractions)."""
+    return {
+        "C": (1 + len(CENTRE_SHORTER) + len(CENTRE_DROPS) * len(CENTRE_BELOW)) * (1 + len(Q_CHOICES)),
+        "P": (1 + len(PAIR_SHORTER) + len(PAIR_DROPS)) * (1 + len(PAIR_Q)),
+        "N": len(NEIGHBOUR_STEPS) + len(NEIGHBOUR_UP) + len(NEIGHBOUR_DROPS),
+        "M": len(PAIR_MIDDLE_STEPS) + len(PAIR_MIDDLE_UP),
+        "O": len(PAIR_OUTER_STEPS),
+        "E": len(OUTER_STEPS),
+    }.get(role, 1)
+
+
+def _solve_batch(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
+    """Solve the disjoint windows ``gaps`` ``(w, K)``; ``ticks``, ``v``, ``q_out`` updated in place.
+
+    ``roles`` per position: ``F`` fixed, ``N`` a centre's neighbour, ``C`` a centre (its ramp fraction too
+    where it cruises), ``P`` one of a pair's centres, ``M`` the gap between a pair's centres, ``O`` a pair's
+    outer neighbour; each gap's candidates (``C``, ``N``: :func:`_centre_candidates`,
+    :func:`_neighbour_candidates`), every combination checked.
+    """
+    K = gaps.shape[1]
     q = q_out.copy()  # two-phase gaps of the window move in the whole lens (it holds the ½–½ polygon's motions)
     q[gaps] = np.where(q[gaps] == 0.5, LENS_Q, q[gaps])
     tk, qk = [], []
-    for j in range(K):
+    for j, role in enumerate(roles):
         gj = gaps[:, j]
-        if j == half:
+        qs = q[gj, None]
+        if role == "C":
             c = _centre_candidates(ticks[gj], first[gj], window)
             if np.any(q[gj] < 0.5):  # jumps that cruise: their ramp fraction is chosen with the counts
-                qs = np.concatenate([q[gj, None], np.broadcast_to(np.array(Q_CHOICES), (gj.size, len(Q_CHOICES)))], 1)
-            else:  # two-phase gaps move in the whole lens, which holds every two-phase motion
-                qs = q[gj, None]
-            tk.append(np.repeat(c, qs.shape[1], axis=1))
-            qk.append(np.tile(qs, (1, c.shape[1])))
-        elif abs(j - half) == 1:
+                qs = np.concatenate([qs, np.broadcast_to(np.array(Q_CHOICES), (gj.size, len(Q_CHOICES)))], 1)
+        elif role == "P":
+            c = _pair_candidates(ticks[gj], first[gj], window)
+            cr = q[gj, None] < 0.5  # a cruising centre: a few ramp fractions (the others keep their own)
+            if np.any(cr):
+                qs = np.concatenate([qs, np.where(cr, np.array(PAIR_Q)[None], qs)], 1)
+        elif role == "N":
             c = _neighbour_candidates(ticks[gj], first[gj], window)
-            tk.append(c)
-            qk.append(np.broadcast_to(q[gj, None], c.shape))
+        elif role == "M":
+            c = _steps_candidates(ticks[gj], first[gj], window, PAIR_MIDDLE_STEPS, PAIR_MIDDLE_UP)
+        elif role == "O":
+            c = _steps_candidates(ticks[gj], first[gj], window, PAIR_OUTER_STEPS, ())
+        elif role == "E":
+            c = _steps_candidates(ticks[gj], first[gj], window, OUTER_STEPS, ())
         else:
-            tk.append(ticks[gj][:, None])
-            qk.append(q[gj][:, None])
+            c = ticks[gj][:, None]
+        tk.append(np.repeat(c, qs.shape[1], axis=1))
+        qk.append(np.tile(qs, (1, c.shape[1])))
     Dw, cmw = D[gaps], capm[gaps]
     ckw = capk[np.concatenate([gaps, gaps[:, -1:] + 1], axis=1)]
     v_in, v_out = v[gaps[:, 0]], v[gaps[:, -1] + 1]
-    ok, total, los, his = _forward(v_in, Dw, tk, qk, cmw, ckw, A, f)
-    tol = EPS_MM_S * (1 + np.abs(v_out[:, None]))
-    ok &= np.all((los[-1] <= v_out[:, None] + tol) & (his[-1] >= v_out[:, None] - tol), axis=-1)
-    total = np.where(ok, total, np.iinfo(np.int64).max)
+    # meet in the middle: forward from the pinned entry through the first gaps, backward (time reversed) from the
+    # pinned exit through the others; a combination is feasible where the two intervals at the split knot meet
+    s = K // 2 + 1
+    okf, tf, lof, hif = _forward(v_in, Dw[:, :s], tk[:s], qk[:s], cmw[:, :s], ckw[:, : s + 1], A, f)
+    rev = slice(K - 1, s - 1, -1)
+    okb, tb, lob, hib = _forward(-v_out, -Dw[:, rev], tk[rev], qk[rev], cmw[:, rev], ckw[:, K : s - 1 : -1], A, f)
+    lo, hi = lof[-1][:, :, None], hif[-1][:, :, None]  # (w, Pf, 1, 3)
+    blo, bhi = -hib[-1][:, None], -lob[-1][:, None]  # (w, 1, Pb, 3)
+    tol = EPS_MM_S * (1 + np.abs(lo))
+    meet = np.all(np.maximum(lo, blo) <= np.minimum(hi, bhi) + tol, axis=-1)
+    ok = okf[:, :, None] & okb[:, None, :] & meet
+    total = np.where(ok, tf[:, :, None] + tb[:, None, :], np.iinfo(np.int64).max).reshape(len(gaps), -1)
     best = np.argmin(total, axis=1)
-    gain = total[np.arange(len(centre)), best] < ticks[gaps].sum(axis=1)
+    gain = total[np.arange(len(gaps)), best] < ticks[gaps].sum(axis=1)
     if not np.any(gain):
         return
     w = np.flatnonzero(gain)
-    idx = np.unravel_index(best[w], [t.shape[1] for t in tk])  # each gap's candidate, C order
+    pf, pb = np.divmod(best[w], tb.shape[1])
+    idx = np.unravel_index(pf, [t.shape[1] for t in tk[:s]]) + np.unravel_index(pb, [t.shape[1] for t in tk[rev]])[::-1]
     new = np.stack([tk[j][w, idx[j]] for j in range(K)], axis=1)  # (w', K)
     newq = np.stack([qk[j][w, idx[j]] for j in range(K)], axis=1)
-    sizes = np.cumprod([t.shape[1] for t in tk])
-    flo = np.stack([los[j][w, best[w] // (sizes[-1] // sizes[j - 1]) if j else 0] for j in range(K + 1)], axis=1)
-    fhi = np.stack([his[j][w, best[w] // (sizes[-1] // sizes[j - 1]) if j else 0] for j in range(K + 1)], axis=1)
+    # the chosen combination's forward intervals (one candidate per gap), then the velocities picked backwards
+    ok1, _, los, his = _forward(v_in[w], Dw[w], list(new.T[:, :, None]), list(newq.T[:, :, None]), cmw[w], ckw[w], A, f)
+    tol = EPS_MM_S * (1 + np.abs(v_out[w][:, None]))
+    ok1 = ok1[:, 0] & np.all((los[-1] <= v_out[w][:, None] + tol) & (his[-1] >= v_out[w][:, None] - tol), axis=(1, 2))
+    w, new, newq = w[ok1], new[ok1], newq[ok1]  # (a rounding slip at the split knot: that window keeps its plan)
+    flo = np.stack([los[j][ok1, 0] for j in range(K + 1)], axis=1)
+    fhi = np.stack([his[j][ok1, 0] for j in range(K + 1)], axis=1)
     vw = _pick_back(v_out[w], Dw[w], new, newq, cmw[w], ckw[w], flo, fhi, v[gaps[w]], A, f)
     ticks[gaps[w]] = new
     q_out[gaps[w]] = newq
