@@ -265,16 +265,16 @@ def _count(role: str) -> int:
     }.get(role, 1)
 
 
-def _solve_batch(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
-    """Solve the disjoint windows ``gaps`` ``(w, K)``; ``ticks``, ``v``, ``q_out`` updated in place.
+def window_candidates(gaps, roles, ticks, q, first, window: PulseWindow) -> tuple[list, list]:
+    """Each window gap's candidates by its role: ``(tk, qk)``, per position ``(w, C_j)`` counts and ramp fractions.
 
-    ``roles`` per position: ``F`` fixed, ``N`` a centre's neighbour, ``C`` a centre (its ramp fraction too
-    where it cruises), ``P`` one of a pair's centres, ``M`` the gap between a pair's centres, ``O`` a pair's
-    outer neighbour; each gap's candidates (``C``, ``N``: :func:`_centre_candidates`,
-    :func:`_neighbour_candidates`), every combination checked.
+    ``gaps`` ``(w, K)``, ``ticks`` ``(g,)`` the plan, ``q`` ``(g,)`` its ramp fractions (two-phase gaps are
+    given the lens, which holds every two-phase motion), ``first`` ``(g,)`` the shortest admissible counts.
+    Roles: ``F`` fixed, ``E`` a single window's outer gap, ``N`` a centre's neighbour, ``C`` a centre (with its
+    ramp fraction where it cruises), ``P`` one of a pair's centres, ``M`` the gap between them, ``O`` a pair's
+    outer neighbour.
     """
-    K = gaps.shape[1]
-    q = q_out.copy()  # two-phase gaps of the window move in the whole lens (it holds the ½–½ polygon's motions)
+    q = q.copy()
     q[gaps] = np.where(q[gaps] == 0.5, LENS_Q, q[gaps])
     tk, qk = [], []
     for j, role in enumerate(roles):
@@ -301,27 +301,54 @@ def _solve_batch(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, windo
             c = ticks[gj][:, None]
         tk.append(np.repeat(c, qs.shape[1], axis=1))
         qk.append(np.tile(qs, (1, c.shape[1])))
-    Dw, cmw = D[gaps], capm[gaps]
-    ckw = capk[np.concatenate([gaps, gaps[:, -1:] + 1], axis=1)]
-    v_in, v_out = v[gaps[:, 0]], v[gaps[:, -1] + 1]
-    # meet in the middle: forward from the pinned entry through the first gaps, backward (time reversed) from the
-    # pinned exit through the others; a combination is feasible where the two intervals at the split knot meet
+    return tk, qk
+
+
+def meet(v_in, v_out, D, tk, qk, capm, capk, A, f):
+    """Totals ``(w, Pf Pb)`` of every combination of candidates through windows between pinned velocities
+    (``int64`` max where infeasible), ``s`` the split knot and ``Pb``.
+
+    Meet in the middle: the speed intervals are propagated forward from the pinned entry ``v_in`` ``(w, 3)``
+    through gaps ``0..s-1`` (:func:`_forward`) and backward — time reversed, speeds negated — from the pinned
+    exit ``v_out`` through gaps ``K-1..s``; a combination is feasible exactly where the two intervals at knot
+    ``s`` meet on every axis (each is the set of speeds there reachable from its end). The same answer as
+    propagating every combination through the whole window, with ``Pf + Pb`` projections instead of ``Pf Pb``.
+    Combination ``i`` is the forward one ``i // Pb`` (C order over gaps ``0..s-1``) with the backward ``i % Pb``
+    (C order over gaps ``K-1..s``). Shapes as :func:`_forward`.
+    """
+    K = len(tk)
     s = K // 2 + 1
-    okf, tf, lof, hif = _forward(v_in, Dw[:, :s], tk[:s], qk[:s], cmw[:, :s], ckw[:, : s + 1], A, f)
+    okf, tf, lof, hif = _forward(v_in, D[:, :s], tk[:s], qk[:s], capm[:, :s], capk[:, : s + 1], A, f)
     rev = slice(K - 1, s - 1, -1)
-    okb, tb, lob, hib = _forward(-v_out, -Dw[:, rev], tk[rev], qk[rev], cmw[:, rev], ckw[:, K : s - 1 : -1], A, f)
+    okb, tb, lob, hib = _forward(-v_out, -D[:, rev], tk[rev], qk[rev], capm[:, rev], capk[:, K : s - 1 : -1], A, f)
     lo, hi = lof[-1][:, :, None], hif[-1][:, :, None]  # (w, Pf, 1, 3)
     blo, bhi = -hib[-1][:, None], -lob[-1][:, None]  # (w, 1, Pb, 3)
     tol = EPS_MM_S * (1 + np.abs(lo))
-    meet = np.all(np.maximum(lo, blo) <= np.minimum(hi, bhi) + tol, axis=-1)
-    ok = okf[:, :, None] & okb[:, None, :] & meet
-    total = np.where(ok, tf[:, :, None] + tb[:, None, :], np.iinfo(np.int64).max).reshape(len(gaps), -1)
+    ok = okf[:, :, None] & okb[:, None, :] & np.all(np.maximum(lo, blo) <= np.minimum(hi, bhi) + tol, axis=-1)
+    total = np.where(ok, tf[:, :, None] + tb[:, None, :], np.iinfo(np.int64).max)
+    return total.reshape(v_in.shape[0], -1), s, tb.shape[1]
+
+
+def _solve_batch(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
+    """Solve the disjoint windows ``gaps`` ``(w, K)``; ``ticks``, ``v``, ``q_out`` updated in place.
+
+    Every combination of the gaps' candidates by ``roles`` (:func:`window_candidates`) checked exactly
+    (:func:`meet`); the least total kept where it is shorter than the plan's, its knot velocities picked
+    backwards inside its forward intervals (:func:`_pick_back`).
+    """
+    K = gaps.shape[1]
+    tk, qk = window_candidates(gaps, roles, ticks, q_out, first, window)
+    Dw, cmw = D[gaps], capm[gaps]
+    ckw = capk[np.concatenate([gaps, gaps[:, -1:] + 1], axis=1)]
+    v_in, v_out = v[gaps[:, 0]], v[gaps[:, -1] + 1]
+    total, s, Pb = meet(v_in, v_out, Dw, tk, qk, cmw, ckw, A, f)
+    rev = slice(K - 1, s - 1, -1)
     best = np.argmin(total, axis=1)
     gain = total[np.arange(len(gaps)), best] < ticks[gaps].sum(axis=1)
     if not np.any(gain):
         return
     w = np.flatnonzero(gain)
-    pf, pb = np.divmod(best[w], tb.shape[1])
+    pf, pb = np.divmod(best[w], Pb)
     idx = np.unravel_index(pf, [t.shape[1] for t in tk[:s]]) + np.unravel_index(pb, [t.shape[1] for t in tk[rev]])[::-1]
     new = np.stack([tk[j][w, idx[j]] for j in range(K)], axis=1)  # (w', K)
     newq = np.stack([qk[j][w, idx[j]] for j in range(K)], axis=1)
