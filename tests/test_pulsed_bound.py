@@ -330,3 +330,64 @@ def test_chain_bound_gains_on_the_sparse_cloud():
     b = path_bound(pts)
     print(f"sparse[:400]: windows {b.window_sum_ticks}, chain {b.chain_ticks}")
     assert b.chain_ticks > b.window_sum_ticks and b.ticks == b.chain_ticks
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    v0=st.floats(-30.0, 30.0),
+    v1=st.floats(-30.0, 30.0),
+    h_hi=st.floats(0.02, 0.2),
+    frac=st.floats(0.0, 1.0),
+    width=st.floats(0.0, 0.004),
+)
+def test_a_block_tested_at_its_end_covers_every_count_in_it(v0, v1, h_hi, frac, width):
+    """The chain tests a block of counts once, at its longest ``h_hi``: for any ``h`` in the block, ``Dmax(h)``
+    is at most ``Dmax(h_hi)`` plus the block's width times ``max(0, -max(v0, v1))`` and ``Dmin(h)`` at least
+    ``Dmin(h_hi)`` less the width times ``max(0, min(v0, v1))`` (``dDmax/dh >= max(v0, v1)``)."""
+    from jaxcnc.planners.pulsed.chain import dmax
+
+    a_max, v_cap = A[0], min(V[0], RAPID)
+    h = max(h_hi - frac * width, 1e-6)
+    if abs(v1 - v0) > a_max * h:
+        return  # not a motion at h
+    top = dmax(v0, v1, h_hi, v_cap, a_max) + (h_hi - h) * max(0.0, -max(v0, v1))
+    bot = -dmax(-v0, -v1, h_hi, v_cap, a_max) - (h_hi - h) * max(0.0, min(v0, v1))
+    assert dmax(v0, v1, h, v_cap, a_max) <= top + 1e-12
+    assert -dmax(-v0, -v1, h, v_cap, a_max) >= bot - 1e-12
+
+
+def test_finer_chain_intervals_never_lower_the_bound():
+    """The intervals of 16, 32 and 64 nest, so each stretch's chain only rises with them (sparse, 400 points)."""
+    from jaxcnc.planners.pulsed.bound import CHAIN_BLOCK_TICKS, N_CHAIN, _candidates
+    from jaxcnc.planners.pulsed.chain import chain_ticks
+
+    pts = clouds.HARD_CASES["sparse"]()[:400]
+    gap = path_bound(pts, chain_bins=0).gap_ticks
+    d = np.diff(pts[:, 0])
+    lo, hi = _candidates(WIN, gap, N_CHAIN, CHAIN_BLOCK_TICKS)
+    start = np.zeros(gap.shape, bool)
+    start[[0, 150, 151, 300]] = True  # four chains
+    runs = [chain_ticks(d, lo, hi, start, WIN.tick_hz, FEED, min(V[0], RAPID), A[0], b) for b in (16, 32, 64)]
+    assert all(r.shape == (4,) for r in runs)
+    assert np.all(runs[0] <= runs[1]) and np.all(runs[0] <= runs[2])
+    assert runs[2].sum() > runs[0].sum()
+    for r in runs:  # every chain at least its gaps' own bounds
+        assert np.all(r >= np.add.reduceat(gap, [0, 150, 151, 300]))
+
+
+@settings(max_examples=10, deadline=None)
+@given(steps=st.lists(st.floats(0.05, 3.0) | st.floats(-3.0, -0.05), min_size=3, max_size=4))
+def test_path_bound_never_above_the_proven_optimum(steps):
+    """Random jump chains on one axis at 2 kHz ticks (so that the search proves the optimum): the bound (windows
+    and chains at their finest) is at most the least time of any motion of the optimum's model."""
+    from jaxcnc.planners.protocol import request_limits
+    from jaxcnc.planners.pulsed.optimum import optimum_window
+    from jaxcnc.planners.pulsed.windows import PulseWindow
+
+    coarse = PulseWindow(tick_hz=2000.0, pulse_hz=40.0, tolerance=0.05, n_min=48, n_max=52, idle_pulses=True)
+    v_req, a_req, _ = request_limits(GLASS)
+    pts = line(np.concatenate([[0.0], np.cumsum(steps)]))
+    b = lower_bound_travel(pts, coarse, V, A, feed_mm_s=FEED, rapid_mm_s=RAPID)
+    opt = optimum_window(pts, coarse, v_req, a_req, b.gap_ticks, feed_mm_s=FEED, rapid_mm_s=RAPID, max_seconds=60)
+    assert opt.proven
+    assert b.ticks <= opt.ticks.sum()

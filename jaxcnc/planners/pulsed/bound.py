@@ -28,14 +28,15 @@ The argument (``docs/pulsed.md``, "The travel-aware lower bound"):
    ``s = w·p`` has ``|s''| <= Σ|w_k| A_k``, ``|s'| <= min(rapid, Σ|w_k| V_k)`` and ``|s'| <= feed`` at a
    pulse; steps 2-3 run on the axes and on the gap's own direction with these limits, every end speed
    at most the feed (a gap alone: the tent from the feed to the feed).
-6. *Chains* (:func:`_chain_ticks`). Per axis, a shortest path over the knot speed's intervals: the cost
+6. *Chains* (:mod:`.chain`). Per axis, a shortest path over the knot speed's intervals: the cost
    of a gap between two intervals is the least admissible count at which any speeds in them admit a
-   motion covering the gap (closed form), so the path's cost is at most any motion's time; stretches of
-   consecutive long gaps are chained, the rest counts the gaps' own bounds. The bound is the larger of
-   the window sum and the best axis' chain.
+   motion covering the gap (closed form), so the path's cost is at most any motion's time. Stretches
+   around every long gap are chained; each counts the best of its axes' chains and its own windows,
+   the rest counts the gaps' own bounds and the windows outside the stretches. The bound is the larger
+   of that and the window sum.
 
-Everything is NumPy and vectorised over gaps and candidates; a job of 100k points takes
-milliseconds to a fraction of a second.
+The windows are NumPy, vectorised over gaps and candidates; the chains one compiled JAX program (a second
+or two on the 2,914 gaps of a sparse cloud, less on rows).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jaxcnc.planners.pulsed.chain import chain_ticks
 from jaxcnc.planners.pulsed.windows import PulseWindow, snap_up_ticks
 
 #: Relative slack taken off every continuous time before it is rounded up to ticks, so that
@@ -53,16 +55,20 @@ ROUND_SLACK = 1e-9
 #: How many blocks of admissible tick counts of a neighbour gap the window bound enumerates (about
 #: nine periods at the documents' machine); longer neighbours are covered by the velocity bound.
 N_BLOCKS = 64
-#: Gaps per block of the chain bound's cost tensors.
-CHAIN_CHUNK = 128
 #: Candidate blocks per gap in the chain bound (about 4.5 periods above the gap's own bound).
 N_CHAIN = 32
-#: Knot-speed intervals per axis in the chain bound.
-CHAIN_BINS = 16
+#: Knot-speed intervals per axis in the chain bound: every axis is screened with the coarse count, the
+#: best one is run again with up to ``CHAIN_BINS`` (a multiple of the coarse count, so the intervals nest)
+#: while gaps × intervals² stays within ``CHAIN_WORK``.
+CHAIN_BINS = 64
+CHAIN_BINS_COARSE = 16
+CHAIN_WORK = 2e7
 #: Gaps of context on either side of a long gap in the chain bound.
 CHAIN_CONTEXT = 3
 #: Consecutive candidate counts are bounded together in blocks of this many ticks per period.
 BLOCK_TICKS = 4
+#: The same in the chain bound.
+CHAIN_BLOCK_TICKS = 4
 
 
 @dataclass(frozen=True)
@@ -75,7 +81,8 @@ class TravelBound:
         window_centre: ``(w,)`` gaps at the centre of the three-gap windows used.
         window_ticks: ``(w,)`` each window's bound on the sum of its three gaps.
         tick_hz: ticks per second.
-        chain_ticks: the chain bound (dynamic programming over knot speeds, the best axis; 0: not run).
+        chain_ticks: the bound with chains (dynamic programming over knot speeds on the stretches around
+            long gaps, the best axis per stretch, with the windows elsewhere; 0: not run).
         window_sum_ticks: the bound from the gaps and windows alone (``ticks`` is the larger of the two).
     """
 
@@ -121,10 +128,12 @@ def _ticks_at_least(t_s, tick_hz: float) -> np.ndarray:
     return np.ceil(np.asarray(t_s) * tick_hz * (1.0 - ROUND_SLACK) - 1e-6).astype(np.int64)
 
 
-def _candidates(window: PulseWindow, lo: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+def _candidates(
+    window: PulseWindow, lo: np.ndarray, count: int, block_ticks: int = BLOCK_TICKS
+) -> tuple[np.ndarray, np.ndarray]:
     """Blocks of admissible tick counts at or above ``lo`` ``(h,)``: ``(first, last)`` each ``(h, count)``.
 
-    A block holds consecutive admissible counts (at most ``m`` × :data:`BLOCK_TICKS` in the range of
+    A block holds consecutive admissible counts (at most ``m`` × ``block_ticks`` in the range of
     ``m`` periods, never across a gap between period ranges); the blocks tile every admissible count
     from ``snap_up(lo)`` on.
     """
@@ -135,7 +144,7 @@ def _candidates(window: PulseWindow, lo: np.ndarray, count: int) -> tuple[np.nda
     for c in range(count):  # a handful of columns, each vectorised over the windows
         m = np.maximum(-(-cur // n_max), 1)
         top = np.where(idle, m * n_max, np.maximum(n_max, cur))
-        end = np.minimum(cur + BLOCK_TICKS * m - 1, top)  # wider blocks for longer times
+        end = np.minimum(cur + block_ticks * m - 1, top)  # wider blocks for longer times
         first[:, c], last[:, c] = cur, end
         cur, _ = snap_up_ticks(end + 1, n_min, n_max, idle)
     return first, last
@@ -186,8 +195,8 @@ def lower_bound_travel(
     ``rapid_mm_s``: the machine's path limits (its ``[path] feed`` and ``rapid``, not reduced): the
     path speed at every pulse instant at most the feed, everywhere at most the rapid, the limits the
     planners honour. ``None`` (both): the axis-only bound, certified against ``v_max``/``a_max`` alone.
-    With the path limits the chain bound (:func:`_chain_ticks`, ``chain_bins`` knot-speed intervals per
-    axis; ``0``: not used) runs over every stretch of long gaps. See the module docstring for the
+    With the path limits the chain bound (:func:`.chain.chain_ticks`, at most ``chain_bins`` knot-speed
+    intervals per axis; ``0``: not used) runs over the stretches around long gaps. See the module docstring for the
     argument; ``min_gain_ticks``: only windows that gain at least this much are searched.
     """
     bound = _window_bound(points, window, v_max, a_max, min_gain_ticks, feed_mm_s, rapid_mm_s)
@@ -197,31 +206,54 @@ def lower_bound_travel(
     feed = np.inf if feed_mm_s is None else float(feed_mm_s)
     rapid = np.inf if rapid_mm_s is None else float(rapid_mm_s)
     gap = bound.gap_ticks
-    # chains of long gaps (next to another) with CHAIN_CONTEXT gaps on either side; elsewhere the windows
-    # already see every long gap with its neighbours. Long: more than a period, or a mean speed over a
-    # shortest period that one period's acceleration cannot reach
+    # chains over every long gap with CHAIN_CONTEXT gaps on either side (stretches of consecutive such gaps).
+    # Long: more than a period, or a mean speed over a shortest period that one period's acceleration
+    # cannot reach
     d_all = np.diff(np.asarray(points, dtype=np.float64), axis=0)
     h_min = window.n_min / window.tick_hz
     with np.errstate(invalid="ignore"):
         fast = np.any(np.abs(d_all) > np.asarray(a_max) * h_min**2, axis=1)
     long = (gap > window.n_min) | fast
-    paired = long & (np.concatenate([[False], long[:-1]]) | np.concatenate([long[1:], [False]]))
-    spread = np.convolve(paired, np.ones(2 * CHAIN_CONTEXT + 1), mode="full")
+    spread = np.convolve(long, np.ones(2 * CHAIN_CONTEXT + 1), mode="full")
     hard = spread[CHAIN_CONTEXT : CHAIN_CONTEXT + gap.shape[0]] > 0
     start = hard & ~np.concatenate([[False], hard[:-1]])
     d_vec = d_all[hard]
     rest = int(gap[~hard].sum())
-    chain = 0
+    lo, hi = _candidates(window, gap[hard], N_CHAIN, CHAIN_BLOCK_TICKS)
+    axes = []  # (axis, its knot cap, cap, acceleration)
     for k in range(3):
         V_k, A_k = float(np.asarray(v_max)[k]), float(np.asarray(a_max)[k])
-        if not (np.isfinite(A_k) and hard.any() and np.any(d_vec[:, k] != 0)):
+        if not (np.isfinite(A_k) and np.any(d_vec[:, k] != 0)):
             continue
         v_cap = min(V_k, rapid)
         knot = min(v_cap, feed)
-        if not np.isfinite(knot):
-            continue
-        ticks = rest + _chain_ticks(d_vec[:, k], gap[hard], start[hard], window, knot, v_cap, A_k, chain_bins, N_CHAIN)
-        chain = max(chain, ticks)
+        if np.isfinite(knot):
+            axes.append((k, knot, v_cap, A_k))
+    if not (axes and hard.any()):
+        return bound
+    # every axis with the coarse intervals, then the best one finer (the intervals nest, so the finer
+    # chain is at least the coarse one); as many as the work budget allows: O(gaps × intervals²)
+    coarse = min(chain_bins, CHAIN_BINS_COARSE)
+    fine = coarse
+    while fine + coarse <= chain_bins and hard.sum() * (fine + coarse) ** 2 <= CHAIN_WORK:
+        fine += coarse
+    h_start = start[hard]
+    per_axis = [chain_ticks(d_vec[:, k], lo, hi, h_start, window.tick_hz, *lim, coarse) for k, *lim in axes]
+    if fine > coarse:
+        k, *lim = axes[int(np.argmax([p.sum() for p in per_axis]))]
+        per_axis.append(chain_ticks(d_vec[:, k], lo, hi, h_start, window.tick_hz, *lim, fine))
+    # each chained stretch counts the best of its chains and its own windows (those wholly inside it);
+    # the windows wholly outside every stretch keep their gains; windows across an end are dropped
+    stretch = np.cumsum(h_start) - 1  # (hard gaps,) the stretch of each
+    n_str = int(h_start.sum())
+    c = bound.window_centre
+    gains = bound.window_ticks - (gap[c - 1] + gap[c] + gap[c + 1])
+    inside = hard[c - 1] & hard[c] & hard[c + 1]
+    outside = ~(hard[c - 1] | hard[c] | hard[c + 1])
+    h_index = np.cumsum(hard) - 1  # position of each hard gap among them
+    own = np.bincount(stretch, gap[hard], n_str) + np.bincount(stretch[h_index[c[inside]]], gains[inside], n_str)
+    best = np.max(np.stack([own.astype(np.int64), *per_axis]), axis=0)
+    chain = rest + int(gains[outside].sum()) + int(best.sum())
     return dataclasses.replace(bound, ticks=max(bound.ticks, chain), chain_ticks=chain)
 
 
@@ -344,59 +376,3 @@ def _disjoint(centre: np.ndarray, gain: np.ndarray) -> np.ndarray:
             near &= other != np.arange(centre.shape[0])
             keep &= ~near | (key > key[other])
     return keep
-
-
-def _dmax(v0, v1, h, v_cap, a_max):
-    """``∫_0^h min(v0 + A t, v1 + A (h - t), Vc) dt``: the farthest a 1-D motion from ``v0`` to ``v1`` gets.
-
-    Signed speeds with ``|v0 - v1| <= A h`` and ``v0, v1 <= Vc``; arrays, broadcast.
-    """
-    u = 0.5 * (v0 + v1 + a_max * h)
-    tent = (2.0 * u * u - v0 * v0 - v1 * v1) / (2.0 * a_max)
-    cut = v_cap * h - ((v_cap - v0) ** 2 + (v_cap - v1) ** 2) / (2.0 * a_max)
-    return np.where(u <= v_cap, tent, cut)
-
-
-def _chain_ticks(d_mm, gap, start, window, knot_cap, v_cap, a_max, bins: int, count: int) -> int:
-    """A bound on a chain of gaps from one axis' motion (dynamic programming over knot speeds).
-
-    ``d_mm`` ``(g,)`` the axis' signed displacement per gap, ``gap`` ``(g,)`` each gap's own bound
-    (ticks), ``start`` ``(g,)`` bool: a new chain starts at this gap (its entry speed is free: the sum of
-    the chains' bounds). The axis' speed at every pulse lies in ``[-knot_cap, knot_cap]``, split into
-    ``bins`` intervals. The cost of gap ``i`` from interval ``I`` to interval ``J`` is the least
-    admissible count ``>= gap[i]`` at which *some* speeds in ``I`` and ``J`` admit a motion covering
-    ``d_i`` (``|a| <= A``, ``|v| <= v_cap``), so the cheapest path through the intervals is at most the
-    time of any motion (whose knot speeds lie in some intervals). Returns the sum over the chains.
-    """
-    f = window.tick_hz
-    g = d_mm.shape[0]
-    edges = np.linspace(-knot_cap, knot_cap, bins + 1)
-    p0, p1 = edges[:-1][:, None], edges[1:][:, None]  # entry interval (B, 1)
-    q0, q1 = edges[:-1][None, :], edges[1:][None, :]  # exit interval (1, B)
-    cost_to = np.zeros(bins)  # least ticks to reach each interval at the current knot
-    for s in range(0, g, CHAIN_CHUNK):  # chunks of gaps: (chunk, B, B) per candidate block
-        d = d_mm[s : s + CHAIN_CHUNK][:, None, None]
-        lo, hi = _candidates(window, gap[s : s + CHAIN_CHUNK], count)
-        cost = np.full((d.shape[0], bins, bins), -1, np.int64)
-        for j in range(count):
-            h = (hi[:, j] / f)[:, None, None]
-            # a count anywhere in the block: reach at its longest, and Dmax(h) >= Dmax(h_hi) - cap (h_hi - h)
-            # because dDmax/dh is the peak speed, at least max(v0, v1) >= -knot_cap
-            slack = knot_cap * (hi[:, j] - lo[:, j])[:, None, None] / f
-            Ah = a_max * h
-            ok = (p0 - q1 <= Ah) & (q0 - p1 <= Ah)  # some pair within reach of each other
-            # Dmax grows with both speeds: its maximum over the pairs in reach is at this corner
-            top = _dmax(np.minimum(p1, q1 + Ah), np.minimum(q1, p1 + Ah), h, v_cap, a_max) + slack
-            bot = -_dmax(-np.maximum(p0, q0 - Ah), -np.maximum(q0, p0 - Ah), h, v_cap, a_max) - slack
-            ok &= (bot <= d) & (d <= top) & (cost < 0)
-            cost = np.where(ok, lo[:, j][:, None, None], cost)
-            if j % 4 == 3 and not (cost < 0).any():
-                break
-        # beyond the enumerated counts: longer than the last block
-        cost = np.where(cost < 0, (hi[:, -1] + 1)[:, None, None], cost)
-        first = start[s : s + CHAIN_CHUNK]
-        for i in range(cost.shape[0]):  # min-plus, one gap at a time
-            if first[i]:
-                cost_to = np.full(bins, cost_to.min())
-            cost_to = np.min(cost_to[:, None] + cost[i], axis=0)
-    return int(cost_to.min())
