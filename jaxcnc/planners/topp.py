@@ -30,6 +30,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.errors import PlanningError
+from jaxcnc.geometry.evaluate import evaluate_path
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
@@ -189,12 +190,55 @@ def _band_pieces(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...
 
 
 @jax.jit
-def _band_solve(pieces: dict, laws: dict, x_start) -> dict:
-    """The second program of a window without boxes: the backward and forward scans, then the trapezoids."""
+def _band_solve(pieces: dict, laws: dict, x_start, check: dict | None = None) -> dict:
+    """The second program of a window without boxes: the backward and forward scans, then the trapezoids;
+    with ``check`` (:func:`_interior_bad`'s frames and ``a_max``) also each interval's ``bad``."""
     x_node, exact, k0 = solve_pieces(pieces, jnp.zeros(()), x_start)
     out = _segment_laws(laws, x_node)
     out.update(x_node=x_node, share=laws["share"], exact=exact, k0=k0)
+    if check is not None:
+        out["bad"] = _interior_bad(check, x_node, laws["delta"], laws["curved"], laws["share"])
     return out
+
+
+def _interior_bad(check: dict, x_node, delta, curved, share) -> jnp.ndarray:
+    """:func:`interior_excess` of a window without boxes, compiled over all ``(m,)`` intervals with the same
+    operations (lines and points masked): ``check`` holds ``t_a, k_a, t_b, k_b`` and ``t_m, k_m`` (``q'``, ``q''``
+    at the intervals' midpoints) as ``(3, m)`` and ``a_max`` ``(3,)``."""
+    xa, xb = x_node[:-1], x_node[1:]
+    on = curved & (delta > 0)
+    u = (xb - xa) / (2.0 * jnp.where(on, delta, 1.0))
+    a0 = check["t_a"] * u + check["k_a"] * xa
+    am = check["t_m"] * u + check["k_m"] * ((xa + xb) / 2)
+    a1 = check["t_b"] * u + check["k_b"] * xb
+    lin, quad = -3.0 * a0 + 4.0 * am - a1, 2.0 * a0 - 4.0 * am + 2.0 * a1
+    tau = jnp.clip(jnp.nan_to_num(-lin / (2.0 * quad), nan=0.0), 0.0, 1.0)
+    peak = jnp.maximum(jnp.abs(a0 + lin * tau + quad * tau**2), jnp.abs(am))
+    acc = jnp.minimum(check["a_max"], BIG)[:, None] * share[None, :]
+    return on & jnp.any(peak > acc * (1.0 - GRID_MARGIN / 2) / (1.0 - GRID_MARGIN), axis=0)
+
+
+@partial(jax.jit, static_argnames=("only",))
+def _frame_columns(arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None) -> tuple[jnp.ndarray, ...]:
+    """``q'`` and ``q''`` at ``s`` along spans ``span`` ``(q,)`` (:func:`~.grid.path_frame`) as six ``(q,)``
+    columns (x, y, z of each): separate outputs of one fused loop (a transposed ``(3, q)`` output would make XLA
+    evaluate the frame once per row)."""
+    _, t, k = evaluate_path(arrays, span, s, 2, xp=jnp, only=only)
+    return tuple(t[:, i] for i in range(3)) + tuple(k[:, i] for i in range(3))
+
+
+#: Alignment (bytes) at which the CPU backend takes a NumPy array without copying it (``jax.device_put``).
+_ALIGN = 64
+
+
+def _aligned(shape: int | tuple[int, ...], dtype=np.float64) -> np.ndarray:
+    """An uninitialised array whose data start on a :data:`_ALIGN`-byte boundary: the compiled programs read it
+    in place (an unaligned array is copied on every call; a window's inputs are ~25 MB)."""
+    dtype = np.dtype(dtype)
+    size = int(np.prod(shape)) * dtype.itemsize
+    raw = np.empty(size + _ALIGN, np.uint8)
+    skip = -raw.ctypes.data % _ALIGN
+    return raw[skip : skip + size].view(dtype).reshape(shape)
 
 
 @partial(jax.jit, static_argnames=("axes",))
@@ -222,17 +266,18 @@ def _interval_rows(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, .
     """Each interval's caps and constraint rows (elementwise; ``g`` as :func:`plan_grid`'s, or a chunk of it):
     ``rows``, ``delta``, ``cap_a`` for the passes, ``vcap_a``, ``vcap_b``, ``curved``, ``dwell`` for
     :func:`_segment_laws`."""
-    col = {f: tuple(g[f][i] for i in range(3)) for f in _AXIS_FIELDS}
+    boxed = "boxed" in g  # windows without blends leave the box fields out (rows as without boxes: same values)
+    col = {f: tuple(g[f][i] for i in range(3)) for f in (_AXIS_FIELDS if boxed else _AXIS_FIELDS[:4])}
     curved = g["curved"]
     share = interval_share(g["at_kink"], curved)
     vel_share = jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
     vel = tuple(jnp.minimum(v_max[i], BIG) * vel_share for i in range(3))
     vcap_a = speed_cap(col["t_a"], col["k_a"], vel, g["feed"], chord_tol, tick_hz)
     vcap_b = speed_cap(col["t_b"], col["k_b"], vel, g["feed"], chord_tol, tick_hz)
-    # in a box the axis speeds and the feed are capped everywhere inside, not at the ends alone
-    vcap_box = box_speed_cap(col["t_lo"], col["t_hi"], vel, g["feed"])
-    vcap_a = jnp.where(g["boxed"], jnp.minimum(vcap_a, vcap_box), vcap_a)
-    vcap_b = jnp.where(g["boxed"], jnp.minimum(vcap_b, vcap_box), vcap_b)
+    if boxed:  # in a box the axis speeds and the feed are capped everywhere inside, not at the ends alone
+        vcap_box = box_speed_cap(col["t_lo"], col["t_hi"], vel, g["feed"])
+        vcap_a = jnp.where(g["boxed"], jnp.minimum(vcap_a, vcap_box), vcap_a)
+        vcap_b = jnp.where(g["boxed"], jnp.minimum(vcap_b, vcap_box), vcap_b)
     is_point = g["is_point"]
     cap_a = jnp.where(is_point, 0.0, jnp.minimum(vcap_a, g["cap_first"]))
     cap_b = jnp.where(is_point, 0.0, jnp.minimum(vcap_b, g["cap_last"]))
@@ -241,8 +286,8 @@ def _interval_rows(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, .
         x_jerk = jerk_cap(col["k_a"], col["k_b"], g["delta"], j_max)
         cap_a, cap_b = jnp.minimum(cap_a, x_jerk), jnp.minimum(cap_b, x_jerk)
     acc = [jnp.minimum(a_max[i], BIG) * share for i in axes]
-    on = {f: [col[f][i] for i in axes] for f in _AXIS_FIELDS}  # the axes whose rows can bind
-    box = (g["boxed"], on["t_lo"], on["t_hi"], on["k_lo"], on["k_hi"])
+    on = {f: [col[f][i] for i in axes] for f in col}  # the axes whose rows can bind
+    box = (g["boxed"], on["t_lo"], on["t_hi"], on["k_lo"], on["k_hi"]) if boxed else None
     rows = constraint_rows(g["delta"], on["t_a"], on["k_a"], on["t_b"], on["k_b"], acc, cap_b, box)
     return dict(rows=rows, delta=g["delta"], cap_a=cap_a, vcap_a=vcap_a, vcap_b=vcap_b, curved=curved, dwell=g["dwell"])
 
@@ -420,21 +465,148 @@ class _ProgramFacts:
 
 def _solve_refined(
     req: PlanRequest, facts: _ProgramFacts, counts: np.ndarray, first: int, last: int, x_start: float
-) -> tuple[Grid, dict[str, np.ndarray]]:
+) -> tuple[Grid | _Intervals, dict[str, np.ndarray]]:
     """Grid and plan of spans ``first..last-1``, cutting curved spans finer (``counts``, in place) until the
     interior check passes. Only this window's spans are uploaded for the grid's evaluations (the working
-    memory of a window does not grow with the program)."""
-    curved = bool(is_curved(req.spans.kind[first:last]).any())
-    arrays = device_spans(req.spans, first, last) if curved else None
+    memory of a window does not grow with the program). A window without blends takes :func:`_plain_window`."""
+    kinds = req.spans.kind[first:last]
+    curved = is_curved(kinds)
+    arrays = device_spans(req.spans, first, last) if curved.any() else None
+    plain = not np.any(kinds == SpanKind.BLEND)
     for _ in range(MAX_REFINE):
-        grid = build_grid(req.spans, counts, arrays, first, last)
-        out = _solve_grid(req, facts, grid, x_start)
-        acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
-        bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first)
+        if plain:
+            grid, out = _plain_window(req, facts, counts, arrays, curved, first, last, x_start)
+            bad = out.pop("bad")[: len(grid)] if "bad" in out else np.zeros(len(grid), bool)
+        else:
+            grid = build_grid(req.spans, counts, arrays, first, last)
+            out = _solve_grid(req, facts, grid, x_start)
+            acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
+            bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first)
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
     raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
+
+
+@dataclass(frozen=True, eq=False)
+class _Intervals:
+    """Where the intervals of a window without blends lie (:class:`~.grid.Grid`'s first three fields)."""
+
+    span: np.ndarray
+    s_start: np.ndarray
+    delta: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.span.shape[0])
+
+
+def _plain_window(
+    req: PlanRequest,
+    facts: _ProgramFacts,
+    counts: np.ndarray,
+    arrays: dict | None,
+    curved_span: np.ndarray,
+    first: int,
+    last: int,
+    x_start: float,
+) -> tuple[_Intervals, dict[str, np.ndarray]]:
+    """:func:`build_grid`, :func:`_solve_grid` and :func:`interior_excess` of a window without blends (no boxes):
+    the same values, made straight in the padded axis-major ``(3, mb)`` layout the compiled programs read.
+
+    The frames are evaluated once per node (an interval's end is the next one's start on the same span: the
+    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call; the interior check runs in the
+    solve's second program (:func:`_interior_bad`) and comes back as ``out["bad"]``. ``curved_span``: ``(last -
+    first,)`` which of the window's spans are curved; ``arrays``: their :func:`~.grid.device_spans` (``None``
+    without curves).
+    """
+    spans = req.spans
+    span, s_start, s_end = cut_spans(spans.length, counts, first, last)
+    local = span - first
+    m = span.size
+    mb = bucket_size(m)
+    delta = s_end - s_start
+    curved = curved_span[local]
+
+    def padded(values: np.ndarray, fill, dtype=np.float64) -> np.ndarray:
+        out = _aligned(mb, dtype)
+        out[:m] = values
+        out[m:] = fill
+        return out
+
+    def taken(source: np.ndarray, fill) -> np.ndarray:
+        out = _aligned(mb, source.dtype)
+        np.take(source, span, out=out[:m])
+        out[m:] = fill
+        return out
+
+    def zeros() -> np.ndarray:
+        out = _aligned((3, mb))
+        out[...] = 0.0
+        return out
+
+    g = {"delta": padded(delta, 0.0), "curved": padded(curved, False, bool)}
+    for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
+        cols = np.ascontiguousarray(field[first:last].T)  # (3, window's spans)
+        g[f] = _aligned((3, mb))
+        for i in range(3):
+            np.take(cols[i], local, out=g[f][i, :m])
+        g[f][:, m:] = 0.0
+    g["k_a"], g["k_b"] = zeros(), zeros()
+    idx = np.flatnonzero(curved)
+    last_iv = np.append(span[1:] != span[:-1], True)  # the last interval of its span
+    if idx.size:
+        ends = np.flatnonzero(last_iv[idx])
+        n_c, n_e = idx.size, ends.size
+        # nodes: every curved interval's start and each curved span's end; then the midpoints
+        q = 2 * n_c + n_e
+        which, where = _aligned(bucket_size(q), np.int64), _aligned(bucket_size(q))
+        which[q:], where[q:] = 0, 0.0
+        which[:n_c], where[:n_c] = local[idx], s_start[idx]
+        which[n_c : n_c + n_e], where[n_c : n_c + n_e] = local[idx[ends]], s_end[idx[ends]]
+        which[n_c + n_e : q], where[n_c + n_e : q] = local[idx], s_start[idx] + delta[idx] / 2
+        only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
+        frames = [np.asarray(a) for a in _frame_columns(arrays, which, where, only)]
+        inner = np.ones(n_c, bool)
+        inner[ends] = False
+        nxt = idx[inner] + 1  # the next interval starts where this one ends
+        t_m, k_m = zeros(), zeros()
+        for j, (a, b, mid) in enumerate(((g["t_a"], g["t_b"], t_m), (g["k_a"], g["k_b"], k_m))):
+            for i in range(3):
+                col = frames[3 * j + i]
+                a[i, idx] = col[:n_c]
+                b[i, idx[inner]] = a[i, nxt]
+                b[i, idx[ends]] = col[n_c : n_c + n_e]
+                mid[i, idx] = col[n_c + n_e : q]
+    first_iv = s_start == 0
+    cap_first = np.where(first_iv, facts.cap_start[span], np.inf)
+    cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
+    g.update(
+        feed=taken(req.feed_mm_s, 0.0),
+        dwell=padded(np.where(first_iv, req.dwell_s[span], 0.0), 0.0),
+        at_kink=taken(facts.at_kink, False),  # padding intervals: points at rest after the window
+        is_point=taken(facts.is_point, True),
+        cap_first=padded(cap_first, 0.0),
+        cap_last=padded(np.where(last_iv, facts.cap_end[span], np.inf), 0.0),
+    )
+    grid = _Intervals(span, s_start, delta)
+    hold_a, hold_b = node_holds(req, grid)
+    g["hold_a"], g["hold_b"] = padded(hold_a, np.inf), padded(hold_b, np.inf)
+    j_max = req.j_max
+    limits = (
+        np.asarray(req.v_max),
+        np.asarray(req.a_max),
+        req.machine.path.chord_tol_mm,
+        req.machine.tick_hz,
+    )
+    j_max = np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None
+    if not idx.size:
+        out = _plan_lines(g, *limits, x_start, axes=facts.axes, j_max=j_max)
+    else:
+        g = jax.device_put(g)
+        check = {f: g[f] for f in ("t_a", "k_a", "t_b", "k_b")} | {"t_m": t_m, "k_m": k_m, "a_max": limits[1]}
+        pieces, laws = _band_pieces(g, *limits, axes=facts.axes, j_max=j_max)
+        out = _band_solve(pieces, laws, x_start, check)
+    return grid, {k: np.asarray(v) for k, v in jax.device_get(out).items()}
 
 
 #: Plans of at least this many segments derive where their segments lie instead of storing it (the check costs

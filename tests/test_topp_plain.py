@@ -1,0 +1,80 @@
+"""``topp``'s windows without blends (:func:`jaxcnc.planners.topp._plain_window`): the same plan, bit for bit, as
+the general grid (:func:`~jaxcnc.planners.grid.build_grid`, ``_solve_grid``, ``interior_excess``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import jaxcnc.planners.topp as topp
+from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline
+from jaxcnc.geometry import build_spans
+from jaxcnc.io.curves import curves_program
+from jaxcnc.machine import parse_machine
+from jaxcnc.planners import plan_job
+from jaxcnc.planners.grid import build_grid, device_spans, frames_at, interval_counts, is_curved
+from jaxcnc.planners.topp import BIG
+from tests.helpers import random_cubic_nurbs
+from tests.test_plan_memory import _same_plan
+
+
+def _general_window(req, facts, counts, arrays, curved_span, first, last, x_start):
+    """What a window planned before the plain path: the general grid, its solve and the NumPy interior check."""
+    grid = topp.build_grid(req.spans, counts, arrays, first, last)
+    out = topp._solve_grid(req, facts, grid, x_start)
+    acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
+    out["bad"] = topp.interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first)
+    return grid, out
+
+
+def _programs():
+    curve = random_cubic_nurbs(40, seed=7)
+    fast = BENCH_MACHINE.replace("a_max = 3000.0", "a_max = 1.0e5")
+    return [
+        ("cam", cam_polyline(3000), parse_machine(BENCH_MACHINE + "corner_tol_mm = 0\n", "<bench>")),
+        ("nurbs", curves_program([curve], 50.0, start=curve[1][0]), parse_machine(fast, "<bench>")),
+    ]
+
+
+@pytest.mark.parametrize("window", [1 << 17, 1 << 8])
+@pytest.mark.parametrize("which", [0, 1])
+def test_plain_windows_plan_what_the_general_grid_plans(monkeypatch, which, window):
+    name, prog, machine = _programs()[which]
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", window)  # 1 << 8: many windows, each from the last's speed
+    plain = plan_job(prog, machine).plan
+    monkeypatch.setattr(topp, "_plain_window", _general_window)
+    general = plan_job(prog, machine).plan
+    assert len(plain) > 500, name
+    _same_plan(plain, general)
+
+
+def test_the_compiled_interior_check_flags_what_the_numpy_check_flags():
+    """Speeds raised above the plan make some curved intervals exceed their budget inside: both checks
+    flag the same ones (and the plain path's mask is the compiled one)."""
+    prog = cam_polyline(600)
+    machine = parse_machine(BENCH_MACHINE + "corner_tol_mm = 0\n", "<bench>")
+    job = plan_job(prog, machine)
+    spans = build_spans(prog, 0.0)
+    counts = interval_counts(spans)
+    arrays = device_spans(spans)
+    grid = build_grid(spans, counts, arrays)
+    m = len(grid)
+    assert np.array_equal(grid.span, job.plan.span)  # one window, no refinement: the grid is the plan's
+    x = np.append(job.plan.v0, job.plan.v1[-1]) ** 2
+    share = topp.interval_share(np.zeros(m, bool), grid.curved)
+    a_max = np.array([3000.0, 3000.0, 3000.0])
+    idx = np.flatnonzero(grid.curved)
+    t_m, k_m = frames_at(arrays, grid.span[idx], grid.s_start[idx] + grid.delta[idx] / 2)
+    mid_t, mid_k = np.zeros((m, 3)), np.zeros((m, 3))
+    mid_t[idx], mid_k[idx] = t_m, k_m
+    check = {"t_a": grid.t_a.T, "k_a": grid.k_a.T, "t_b": grid.t_b.T, "k_b": grid.k_b.T, "t_m": mid_t.T}
+    check |= {"k_m": mid_k.T, "a_max": a_max}
+    flagged = 0
+    for scale in (0.5, 1.0, 1.02, 1.2, 2.0):
+        acc = np.minimum(a_max, BIG)[None, :] * share[:, None]
+        expected = topp.interior_excess(arrays, grid, x * scale, acc)
+        got = np.asarray(topp._interior_bad(check, x * scale, grid.delta, grid.curved, share))
+        np.testing.assert_array_equal(got, expected, err_msg=f"scale {scale}")
+        flagged += int(expected.sum())
+    assert flagged > 100  # the comparison saw intervals flagged, not only clean ones
+    assert is_curved(spans.kind).any()
