@@ -231,12 +231,15 @@ def lower_bound_travel(
             axes.append((k, knot, v_cap, A_k))
     if not (axes and hard.any()):
         return bound
-    # every axis with the coarse intervals, then the best one finer (the intervals nest, so the finer
-    # chain is at least the coarse one); as many as the work budget allows: O(gaps × intervals²)
+    # as many intervals as the work budget allows, O(gaps × intervals²): every axis at once where it allows
+    # that, else every axis with the coarse intervals and the best one again finer (the intervals nest, so
+    # the finer chain is at least the coarse one)
     coarse = min(chain_bins, CHAIN_BINS_COARSE)
     fine = coarse
     while fine + coarse <= chain_bins and hard.sum() * (fine + coarse) ** 2 <= CHAIN_WORK:
         fine += coarse
+    if len(axes) * hard.sum() * fine**2 <= CHAIN_WORK:
+        coarse = fine
     h_start = start[hard]
     per_axis = [chain_ticks(d_vec[:, k], lo, hi, h_start, window.tick_hz, *lim, coarse) for k, *lim in axes]
     if fine > coarse:
