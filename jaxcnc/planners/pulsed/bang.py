@@ -31,10 +31,12 @@ direction of travel), and :data:`RECAP_PASSES` more sweeps run against the plan 
 The speed is piecewise linear in time, so these hold on the whole gap.
 
 4. The polish (:mod:`.polish`): windows of five gaps around each gap above its shortest period count re-timed
-   jointly between pinned knot velocities — a jump one to three periods shorter, its neighbours a little or a
-   period longer, a cruising jump's ramp fraction ``q``, and every two-phase gap of the window in the *lens*
-   (:func:`lens_project`: the exact set of end speeds of every motion with ``|a| <= A``, of which the ½–½
-   polygon is the inscribed rhombus; each axis then switches at its own instant, :func:`lens_profile`).
+   jointly between pinned knot velocities — a jump one to three periods shorter or a few ticks per period
+   shorter in its count, its neighbours a little or a period longer, a cruising jump's ramp fraction ``q``,
+   and every two-phase gap of the window in the *lens* (:func:`lens_project`: the exact set of end speeds of
+   every motion with ``|a| <= A``, of which the ½–½ polygon is the inscribed rhombus; each axis then switches
+   at its own instant, :func:`lens_profile`); a second round near the first's changes; then windows with two
+   centres (two jumps shortened together while the gap between them takes an idle pulse).
 
 The axes' accelerations step at the knots, so a machine with a jerk limit is planned with ``sync`` instead;
 the first point is reached from rest (a straight move from the start) and the last is left at rest.

@@ -11,19 +11,31 @@ fixed, and only ever shorten a gap. On 40-point windows of the short-rows and te
 - and the optimum's ticks are not feasible in the ½–½ profile at all: its row gaps next to a jump gain or
   shed more speed than the rhombus allows, which the lens does.
 
+On sparse clouds (chains of 0.1–4 mm jumps) and at short rows' jumps the optimum makes moves that span two
+single windows' centres or reach past their neighbours (docs/pulsed.md, "Jump chains and moves across two
+centres"): at a reversal the last row gap before it takes an idle pulse (and the one before it the top of its
+range) while the reversal drops one or two periods; two 14 mm jumps either side of a one-point row both shorten
+while the point between takes an idle pulse; long jumps end a few ticks per period long within their count.
+
 Here every gap whose period count is above its shortest is the centre of a window of ``2 half + 1`` gaps;
 the velocities at the window's two end knots are pinned to the plan's, so windows are independent (the
 plan outside is untouched, its knots keep their speeds) and every window is solved at once (NumPy, batched,
-no loop over gaps). Inside, every combination of a few candidate counts per gap (the centre: its count and
-the tops of the one to three period ranges below it; its neighbours: their count, a few ticks longer or
-shorter within their range, one period more, and — jumps themselves — one or two periods fewer; the outer
-gaps: their count; a cruising centre also its ramp fraction ``q`` or the lens) is checked exactly in
-``bang``'s motion model, every two-phase gap of the window in the lens (:func:`~.bang.lens_project`), by
-propagating the speed intervals from the pinned entry velocity (:func:`~.bang.project`) and testing that
-the pinned exit velocity is reachable; the feasible combination with the least total is kept when it is
-shorter than the plan's, and the interior knot velocities are picked backwards from the pinned exit inside
-the forward intervals. Windows centred on gaps in one residue class modulo ``2 half + 1`` are disjoint, so
-the rounds run class by class.
+no loop over gaps). Inside, every combination of a few candidate counts per gap (the centre: its count, a few
+ticks per period shorter in it, and the tops of the one to three period ranges below it; its neighbours:
+their count, a few ticks longer or shorter within their range, one period more up to that range's top, and
+— jumps themselves — one or two periods fewer; the outer gaps: their count or its range's top, or fixed
+next to a cruising centre; a cruising centre also its ramp fraction ``q`` or the lens) is checked exactly in
+``bang``'s motion model, every two-phase gap of the window in the lens (:func:`~.bang.lens_project`): the
+speed intervals are propagated from the pinned entry velocity forward and from the pinned exit velocity
+backward (:func:`~.bang.project`, time reversed) to the knot after the centre, where they must meet
+(:func:`meet`: as exact as propagating every combination through the window, with the two halves' combinations
+projected instead of their product). The feasible combination with the least total is kept when it is shorter than the plan's,
+and the interior knot velocities are picked backwards from the pinned exit inside the forward intervals.
+Windows centred on gaps in one residue class modulo ``2 half + 1`` are disjoint, so a round runs class by
+class; a second round tries only the windows near the first one's changes. Then **pair windows**
+(:func:`_pair_windows`): two centres one or two gaps apart, both above their shortest count, each with a
+few counts within and below its own (and, cruising, a few ramp fractions), the gap between them longer or
+one period more, their outer neighbours a few ticks either way — the moves across two centres.
 """
 
 from __future__ import annotations
