@@ -18,8 +18,9 @@ from tests.helpers import random_cubic_nurbs
 from tests.test_plan_memory import _same_plan
 
 
-def _general_window(req, facts, counts, arrays, curved_span, first, last, x_start):
+def _general_window(req, facts, counts, arrays, curved_span, compact, first, last, x_start):
     """What a window planned before the plain path: the general grid, its solve and the NumPy interior check."""
+    arrays = device_spans(req.spans, first, last) if curved_span.any() else None
     grid = topp.build_grid(req.spans, counts, arrays, first, last)
     out = topp._solve_grid(req, facts, grid, x_start)
     acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]

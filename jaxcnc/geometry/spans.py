@@ -155,10 +155,17 @@ def empty_polys(degree: int = 2) -> PolyTable:
 # ---- span fields of each kind (dicts of arrays; ``item`` filled when tables are concatenated) --------
 
 
+def row_norm(d: np.ndarray) -> np.ndarray:
+    """``(n,)`` Euclidean norm of each row of ``d`` ``(n, 3)``: ``np.linalg.norm(d, axis=1)`` bit for bit (the same
+    ``sqrt((x² + y²) + z²)``), column by column instead of a reduction over rows of three."""
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    return np.sqrt(x * x + y * y + z * z)
+
+
 def line_fields(a: np.ndarray, b: np.ndarray, rows: np.ndarray) -> dict[str, np.ndarray]:
     """Span fields of straight moves from ``a`` to ``b`` ``(n, 3)`` (program rows ``rows``)."""
     d = b - a
-    length = np.linalg.norm(d, axis=1)
+    length = row_norm(d)
     t = d / np.where(length > 0, length, 1.0)[:, None]
     n = len(rows)
     return dict(
@@ -363,12 +370,21 @@ def assemble(
         for p, rows in parts:
             v = np.asarray(p.pop(key))
             v = v if rows is None else v[rows]
-            a[pos[at : at + v.shape[0]]] = v
+            if v.ndim > 1 and v.dtype == a.dtype:  # whole rows as opaque items: one index per row, not per value
+                _as_rows(a)[pos[at : at + v.shape[0]]] = _as_rows(v)
+            else:
+                a[pos[at : at + v.shape[0]]] = v
             at += v.shape[0]
             del v
         a.setflags(write=False)
         out[key] = a
     return Spans(**out, arcs=arcs, polys=polys)
+
+
+def _as_rows(x: np.ndarray) -> np.ndarray:
+    """``x`` ``(k, ...)`` as ``(k,)`` opaque items of one row each (a view; ``x`` made C-contiguous first)."""
+    x = np.ascontiguousarray(x)
+    return x.view(np.dtype((np.void, x.dtype.itemsize * int(np.prod(x.shape[1:]))))).reshape(x.shape[0])
 
 
 def concat_spans(
@@ -410,7 +426,7 @@ def program_spans(program: Program) -> Spans:
     junctions is the next step (:func:`jaxcnc.geometry.path.build_spans`).
     """
     kind = program.kind
-    move_len = np.linalg.norm(program.end - program.start, axis=1)
+    move_len = row_norm(program.end - program.start)
     rows_line = np.flatnonzero((kind == Kind.LINE) & (move_len > MIN_LENGTH_MM))
     parts: list[tuple[dict, ArcTable | PolyTable | None]] = [
         (line_fields(program.start[rows_line], program.end[rows_line], rows_line), None)
@@ -443,7 +459,16 @@ def pad_spans(spans: Spans, n: int) -> Spans:
 def slice_spans(spans: Spans, first: int, last: int) -> Spans:
     """Spans ``first..last-1`` as a :class:`Spans` of their own: row ``k`` is span ``first + k``, with the arc and
     poly rows they use (``item`` renumbered into those). The span fields are views; the side tables' rows copies."""
-    out = {key: getattr(spans, key)[first:last] for key in SPAN_FIELDS}
+    return _own_tables(spans, {key: getattr(spans, key)[first:last] for key in SPAN_FIELDS})
+
+
+def take_spans(spans: Spans, rows: np.ndarray) -> Spans:
+    """Spans ``rows`` (indices) as a :class:`Spans` of their own, as :func:`slice_spans` (copies)."""
+    return _own_tables(spans, {key: getattr(spans, key)[rows] for key in SPAN_FIELDS})
+
+
+def _own_tables(spans: Spans, out: dict[str, np.ndarray]) -> Spans:
+    """``out`` (some rows of ``spans``' fields) with the arc and poly rows they use, ``item`` renumbered."""
     kind, item = out["kind"], out["item"].copy()
     arcs, polys = spans.arcs, spans.polys
     is_arc = (kind == SpanKind.ARC) & (item >= 0)

@@ -30,8 +30,9 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.errors import PlanningError
-from jaxcnc.geometry.evaluate import evaluate_path
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
     Grid,
@@ -225,6 +226,14 @@ def _frame_columns(arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | 
     evaluate the frame once per row)."""
     _, t, k = evaluate_path(arrays, span, s, 2, xp=jnp, only=only)
     return tuple(t[:, i] for i in range(3)) + tuple(k[:, i] for i in range(3))
+
+
+def _pad_aligned(a: np.ndarray, n: int, fill) -> np.ndarray:
+    """:func:`~jaxcnc.buckets.pad_rows` into an :func:`_aligned` array (read in place by a compiled program)."""
+    out = _aligned((n,) + a.shape[1:], a.dtype)
+    out[: a.shape[0]] = a
+    out[a.shape[0] :] = fill
+    return out
 
 
 #: Alignment (bytes) at which the CPU backend takes a NumPy array without copying it (``jax.device_put``).
@@ -444,10 +453,10 @@ class _ProgramFacts:
         n = len(spans)
         nb = bucket_size(n)
         at_kink, x_junction = _junction_facts(
-            pad_rows(spans.kind, nb, SpanKind.POINT),
-            pad_rows(spans.tangent_in, nb, 0.0),
-            pad_rows(spans.tangent_out, nb, 0.0),
-            pad_rows(req.stop_before, nb, True),
+            _pad_aligned(spans.kind, nb, SpanKind.POINT),
+            _pad_aligned(spans.tangent_in, nb, 0.0),
+            _pad_aligned(spans.tangent_out, nb, 0.0),
+            _pad_aligned(req.stop_before, nb, True),
             np.asarray(req.a_max),
             req.machine.tick_hz,
         )
@@ -471,11 +480,16 @@ def _solve_refined(
     memory of a window does not grow with the program). A window without blends takes :func:`_plain_window`."""
     kinds = req.spans.kind[first:last]
     curved = is_curved(kinds)
-    arrays = device_spans(req.spans, first, last) if curved.any() else None
     plain = not np.any(kinds == SpanKind.BLEND)
+    if plain:  # the frames read the window's curved spans alone: upload those
+        rows = np.flatnonzero(curved)
+        arrays = _compact_device_spans(req.spans, first + rows) if rows.size else None
+        compact = np.cumsum(curved) - 1  # the window's span k is row compact[k] of arrays (where curved)
+    else:
+        arrays = device_spans(req.spans, first, last) if curved.any() else None
     for _ in range(MAX_REFINE):
         if plain:
-            grid, out = _plain_window(req, facts, counts, arrays, curved, first, last, x_start)
+            grid, out = _plain_window(req, facts, counts, arrays, curved, compact, first, last, x_start)
             bad = out.pop("bad")[: len(grid)] if "bad" in out else np.zeros(len(grid), bool)
         else:
             grid = build_grid(req.spans, counts, arrays, first, last)
@@ -500,12 +514,20 @@ class _Intervals:
         return int(self.span.shape[0])
 
 
+def _compact_device_spans(spans: Spans, rows: np.ndarray) -> dict[str, jnp.ndarray]:
+    """:func:`~.grid.device_spans` of spans ``rows`` alone (row ``k`` is span ``rows[k]``), padded to buckets."""
+    sub = take_spans(spans, rows)
+    sub = pad_tables(sub, *(bucket_size(len(t)) if len(t) else 0 for t in (sub.arcs, sub.polys)))
+    return span_arrays(pad_spans(sub, bucket_size(len(sub))), xp=jnp)
+
+
 def _plain_window(
     req: PlanRequest,
     facts: _ProgramFacts,
     counts: np.ndarray,
     arrays: dict | None,
     curved_span: np.ndarray,
+    compact: np.ndarray,
     first: int,
     last: int,
     x_start: float,
@@ -516,8 +538,8 @@ def _plain_window(
     The frames are evaluated once per node (an interval's end is the next one's start on the same span: the
     same ``s``, bit for bit) and at the curved intervals' midpoints, in one call; the interior check runs in the
     solve's second program (:func:`_interior_bad`) and comes back as ``out["bad"]``. ``curved_span``: ``(last -
-    first,)`` which of the window's spans are curved; ``arrays``: their :func:`~.grid.device_spans` (``None``
-    without curves).
+    first,)`` which of the window's spans are curved; ``arrays``: :func:`_compact_device_spans` of those alone
+    (``None`` without curves), the window's span ``k`` their row ``compact[k]``.
     """
     spans = req.spans
     span, s_start, s_end = cut_spans(spans.length, counts, first, last)
@@ -544,6 +566,21 @@ def _plain_window(
         out[...] = 0.0
         return out
 
+    idx = np.flatnonzero(curved)
+    last_iv = np.append(span[1:] != span[:-1], True)  # the last interval of its span
+    if idx.size:  # dispatched first: the frames are evaluated while the other inputs are made here
+        ends = np.flatnonzero(last_iv[idx])
+        n_c, n_e = idx.size, ends.size
+        # nodes: every curved interval's start and each curved span's end; then the midpoints
+        q = 2 * n_c + n_e
+        which, where = _aligned(bucket_size(q), np.int64), _aligned(bucket_size(q))
+        which[q:], where[q:] = 0, 0.0
+        row = compact[local[idx]]
+        which[:n_c], where[:n_c] = row, s_start[idx]
+        which[n_c : n_c + n_e], where[n_c : n_c + n_e] = row[ends], s_end[idx[ends]]
+        which[n_c + n_e : q], where[n_c + n_e : q] = row, s_start[idx] + delta[idx] / 2
+        only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
+        pending = _frame_columns(arrays, which, where, only)
     g = {"delta": padded(delta, 0.0), "curved": padded(curved, False, bool)}
     for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
         cols = np.ascontiguousarray(field[first:last].T)  # (3, window's spans)
@@ -552,31 +589,6 @@ def _plain_window(
             np.take(cols[i], local, out=g[f][i, :m])
         g[f][:, m:] = 0.0
     g["k_a"], g["k_b"] = zeros(), zeros()
-    idx = np.flatnonzero(curved)
-    last_iv = np.append(span[1:] != span[:-1], True)  # the last interval of its span
-    if idx.size:
-        ends = np.flatnonzero(last_iv[idx])
-        n_c, n_e = idx.size, ends.size
-        # nodes: every curved interval's start and each curved span's end; then the midpoints
-        q = 2 * n_c + n_e
-        which, where = _aligned(bucket_size(q), np.int64), _aligned(bucket_size(q))
-        which[q:], where[q:] = 0, 0.0
-        which[:n_c], where[:n_c] = local[idx], s_start[idx]
-        which[n_c : n_c + n_e], where[n_c : n_c + n_e] = local[idx[ends]], s_end[idx[ends]]
-        which[n_c + n_e : q], where[n_c + n_e : q] = local[idx], s_start[idx] + delta[idx] / 2
-        only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
-        frames = [np.asarray(a) for a in _frame_columns(arrays, which, where, only)]
-        inner = np.ones(n_c, bool)
-        inner[ends] = False
-        nxt = idx[inner] + 1  # the next interval starts where this one ends
-        t_m, k_m = zeros(), zeros()
-        for j, (a, b, mid) in enumerate(((g["t_a"], g["t_b"], t_m), (g["k_a"], g["k_b"], k_m))):
-            for i in range(3):
-                col = frames[3 * j + i]
-                a[i, idx] = col[:n_c]
-                b[i, idx[inner]] = a[i, nxt]
-                b[i, idx[ends]] = col[n_c : n_c + n_e]
-                mid[i, idx] = col[n_c + n_e : q]
     first_iv = s_start == 0
     cap_first = np.where(first_iv, facts.cap_start[span], np.inf)
     cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
@@ -591,6 +603,20 @@ def _plain_window(
     grid = _Intervals(span, s_start, delta)
     hold_a, hold_b = node_holds(req, grid)
     g["hold_a"], g["hold_b"] = padded(hold_a, np.inf), padded(hold_b, np.inf)
+    if idx.size:
+        frames = [np.asarray(a) for a in pending]
+        inner = np.ones(n_c, bool)
+        inner[ends] = False
+        nxt = idx[inner] + 1  # the next interval starts where this one ends
+        t_m, k_m = zeros(), zeros()
+        for j, (a, b, mid) in enumerate(((g["t_a"], g["t_b"], t_m), (g["k_a"], g["k_b"], k_m))):
+            for i in range(3):
+                col = frames[3 * j + i]
+                a[i, idx] = col[:n_c]
+                b[i, idx[inner]] = a[i, nxt]
+                b[i, idx[ends]] = col[n_c : n_c + n_e]
+                mid[i, idx] = col[n_c + n_e : q]
+        del frames, pending
     j_max = req.j_max
     limits = (
         np.asarray(req.v_max),
@@ -688,6 +714,8 @@ class _SegmentTable:
         last = int(grid.span[commit - 1]) + 1
         if int(self.counts[self.next_span : last].sum()) != commit:
             return False
+        if isinstance(grid, _Intervals):  # cut_spans of these spans with these counts: _grid_rows would repeat it
+            return True
         span, s_start, length = _grid_rows(self.span_length, self.counts, self.next_span, last)
         return (
             np.array_equal(span, grid.span[:commit])
