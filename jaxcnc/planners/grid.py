@@ -28,17 +28,17 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 from dataclasses import dataclass
-from functools import cache, partial
+from functools import cache, partial, reduce
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, slice_spans
+from jaxcnc.jaxconfig import on_cpu  # (and float64)
 
 MAX_TURN_RAD = 0.0175  # 1°
 #: A boxed (blend) interval turns at most this much, and a blend piece has at least this many
@@ -139,35 +139,54 @@ def frames_at(
     return tuple(np.asarray(d)[:q] for d in path_frame(arrays, which, where, order, only))
 
 
+#: Boxed intervals per call of :func:`_boxes` on a CPU: a chunk's intermediates stay in the core's cache (at
+#: 100k blocks, 400k intervals: 0.12 s CPU in chunks of 8192, 0.17 s in chunks of 16384, 0.22 s in one call).
+BOX_CHUNK = 8192
+
+
 @jax.jit
 def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray) -> tuple[jnp.ndarray, ...]:
-    """Ends and boxes of ``q'`` and ``q''`` on intervals ``[s0, s0 + delta]`` of polynomial spans.
+    """Ends and boxes of ``q'`` and ``q''`` on intervals ``[s0, s0 + delta]`` of polynomial spans (``(m,)``
+    each; returns eight ``(m, 3)`` arrays as :func:`boxes_at`).
 
-    ``BOX_SAMPLES`` points per interval, ends included; between samples ``h`` apart a function rises
-    above the chord between them (so above the higher sample) by at most ``h²/8 max|f''|``.
+    ``BOX_SAMPLES`` points per interval, ends included, each an ``(m,)`` evaluation of its own: the samples'
+    extremes are running minima and maxima of ``(m, 3)`` arrays, elementwise, with no ``(m, BOX_SAMPLES, 3)``
+    array (whose reductions cost twice the arithmetic). Between samples ``h`` apart a function rises above the
+    chord between them (so above the higher sample) by at most ``h²/8 max|f''|``.
     """
-    frac = jnp.linspace(0.0, 1.0, BOX_SAMPLES)
-    where = s0[:, None] + delta[:, None] * frac[None, :]  # (m, BOX_SAMPLES); each span's fields read once
-    _, t, k, d3, d4 = evaluate_path(arrays, span[:, None], where, 4, jnp, only="blend")
+    t, k, d3, d4 = [], [], [], []
+    for frac in np.linspace(0.0, 1.0, BOX_SAMPLES):
+        _, d1_j, d2_j, d3_j, d4_j = evaluate_path(arrays, span, s0 + delta * frac, 4, jnp, only="blend")
+        t.append(d1_j)
+        k.append(d2_j)
+        d3.append(jnp.abs(d3_j))
+        d4.append(jnp.abs(d4_j))
     h2 = (BOX_SAFETY * (delta / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
-    t_pad = jnp.max(jnp.abs(d3), axis=1) * h2
-    k_pad = jnp.max(jnp.abs(d4), axis=1) * h2
+    t_pad = reduce(jnp.maximum, d3) * h2
+    k_pad = reduce(jnp.maximum, d4) * h2
     return (
-        t[:, 0], k[:, 0], t[:, -1], k[:, -1],
-        jnp.min(t, axis=1) - t_pad, jnp.max(t, axis=1) + t_pad,
-        jnp.min(k, axis=1) - k_pad, jnp.max(k, axis=1) + k_pad,
+        t[0], k[0], t[-1], k[-1],
+        reduce(jnp.minimum, t) - t_pad, reduce(jnp.maximum, t) + t_pad,
+        reduce(jnp.minimum, k) - k_pad, reduce(jnp.maximum, k) + k_pad,
     )  # fmt: skip
 
 
 def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, ...]:
-    """:func:`_boxes` for NumPy queries ``(q,)``, padded to a bucket: ``(t_a, k_a, t_b, k_b, t_lo, t_hi, k_lo,
-    k_hi)``, each ``(q, 3)``."""
+    """:func:`_boxes` for NumPy queries ``(q,)``: ``(t_a, k_a, t_b, k_b, t_lo, t_hi, k_lo, k_hi)``, each ``(q, 3)``.
+
+    On a CPU in calls of ``BOX_CHUNK`` rows (the last one padded; all dispatched before any is read), else, and
+    for fewer rows, in one call padded to a bucket: few compiled sizes either way.
+    """
     q = span.size
-    m = bucket_size(q)
-    which, a, d = np.zeros(m, np.int64), np.zeros(m), np.zeros(m)
+    m = BOX_CHUNK if q > BOX_CHUNK and on_cpu() else bucket_size(q)
+    n = -(-q // m) * m
+    which, a, d = np.zeros(n, np.int64), np.zeros(n), np.zeros(n)
     which[:q], a[:q], d[:q] = span, s0, delta
     which[q:] = span[0] if q else 0
-    return tuple(np.asarray(x)[:q] for x in _boxes(arrays, which, a, d))
+    parts = [_boxes(arrays, which[i : i + m], a[i : i + m], d[i : i + m]) for i in range(0, n, m)]
+    if len(parts) == 1:
+        return tuple(np.asarray(x)[:q] for x in parts[0])
+    return tuple(np.concatenate([np.asarray(p[j]) for p in parts])[:q] for j in range(8))
 
 
 def cut_spans(
