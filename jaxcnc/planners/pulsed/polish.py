@@ -28,9 +28,10 @@ next to a cruising centre; a cruising centre also its ramp fraction ``q`` or the
 ``bang``'s motion model, every two-phase gap of the window in the lens (:func:`~.bang.lens_project`): the
 speed intervals are propagated from the pinned entry velocity forward and from the pinned exit velocity
 backward (:func:`~.bang.project`, time reversed) to the knot after the centre, where they must meet
-(:func:`meet`: as exact as propagating every combination through the window, with the two halves' combinations
-projected instead of their product). The feasible combination with the least total is kept when it is shorter than the plan's,
-and the interior knot velocities are picked backwards from the pinned exit inside the forward intervals.
+(:func:`meet`: as exact as propagating every combination through the window, with the two halves'
+combinations projected instead of their product). The feasible combination with the least total is kept when
+it is shorter than the plan's, and the interior knot velocities are picked backwards from the pinned exit
+inside the forward intervals.
 Windows centred on gaps in one residue class modulo ``2 half + 1`` are disjoint, so a round runs class by
 class; a second round tries only the windows near the first one's changes. Then **pair windows**
 (:func:`_pair_windows`): two centres one or two gaps apart, both above their shortest count, each with a
@@ -259,22 +260,11 @@ def _pair_windows(m0, D, ticks, v, q, capm, capk, first, A, f, window) -> None:
 
 def _solve(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
     """Solve the disjoint windows ``gaps`` ``(w, K)`` in batches of at most :data:`COMBINATIONS` combinations."""
-    per = int(np.prod([_count(r) for r in roles], dtype=np.int64))
-    step = max(1, COMBINATIONS // per)
+    tk, qk = window_candidates(gaps, roles, ticks, q_out, first, window)
+    step = max(1, COMBINATIONS // int(np.prod([t.shape[1] for t in tk], dtype=np.int64)))
     for i in range(0, gaps.shape[0], step):
-        _solve_batch(gaps[i : i + step], roles, D, ticks, v, q_out, capm, capk, first, A, f, window)
-
-
-def _count(role: str) -> int:
-    """An upper bound on the candidates of a gap of ``role`` (counts × ramp fractions)."""
-    return {
-        "C": (1 + len(CENTRE_SHORTER) + len(CENTRE_DROPS) * len(CENTRE_BELOW)) * (1 + len(Q_CHOICES)),
-        "P": (1 + len(PAIR_SHORTER) + len(PAIR_DROPS)) * (1 + len(PAIR_Q)),
-        "N": len(NEIGHBOUR_STEPS) + len(NEIGHBOUR_UP) + len(NEIGHBOUR_DROPS),
-        "M": len(PAIR_MIDDLE_STEPS) + len(PAIR_MIDDLE_UP),
-        "O": len(PAIR_OUTER_STEPS),
-        "E": len(OUTER_STEPS),
-    }.get(role, 1)
+        part = slice(i, i + step)
+        _solve_batch(gaps[part], [t[part] for t in tk], [t[part] for t in qk], D, ticks, v, q_out, capm, capk, A, f)
 
 
 def window_candidates(gaps, roles, ticks, q, first, window: PulseWindow) -> tuple[list, list]:
@@ -341,15 +331,14 @@ def meet(v_in, v_out, D, tk, qk, capm, capk, A, f):
     return total.reshape(v_in.shape[0], -1), s, tb.shape[1]
 
 
-def _solve_batch(gaps, roles, D, ticks, v, q_out, capm, capk, first, A, f, window) -> None:
+def _solve_batch(gaps, tk, qk, D, ticks, v, q_out, capm, capk, A, f) -> None:
     """Solve the disjoint windows ``gaps`` ``(w, K)``; ``ticks``, ``v``, ``q_out`` updated in place.
 
-    Every combination of the gaps' candidates by ``roles`` (:func:`window_candidates`) checked exactly
+    Every combination of the gaps' candidates ``tk``, ``qk`` (:func:`window_candidates`) checked exactly
     (:func:`meet`); the least total kept where it is shorter than the plan's, its knot velocities picked
     backwards inside its forward intervals (:func:`_pick_back`).
     """
     K = gaps.shape[1]
-    tk, qk = window_candidates(gaps, roles, ticks, q_out, first, window)
     Dw, cmw = D[gaps], capm[gaps]
     ckw = capk[np.concatenate([gaps, gaps[:, -1:] + 1], axis=1)]
     v_in, v_out = v[gaps[:, 0]], v[gaps[:, -1] + 1]
