@@ -179,7 +179,7 @@ def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) 
     """
     q = span.size
     m = BOX_CHUNK if q > BOX_CHUNK and on_cpu() else bucket_size(q)
-    n = -(-q // m) * m
+    n = max(-(-q // m), 1) * m
     which, a, d = np.zeros(n, np.int64), np.zeros(n), np.zeros(n)
     which[:q], a[:q], d[:q] = span, s0, delta
     which[q:] = span[0] if q else 0
