@@ -601,8 +601,11 @@ def _plain_window(
         cap_last=padded(np.where(last_iv, facts.cap_end[span], np.inf), 0.0),
     )
     grid = _Intervals(span, s_start, delta)
-    hold_a, hold_b = node_holds(req, grid)
-    g["hold_a"], g["hold_b"] = padded(hold_a, np.inf), padded(hold_b, np.inf)
+    if req.hold_caps is None or len(req.hold_caps) == 0:  # no holds: one array of inf for both ends
+        g["hold_a"] = g["hold_b"] = padded(np.inf, np.inf)
+    else:
+        hold_a, hold_b = node_holds(req, grid)
+        g["hold_a"], g["hold_b"] = padded(hold_a, np.inf), padded(hold_b, np.inf)
     if idx.size:
         frames = [np.asarray(a) for a in pending]
         inner = np.ones(n_c, bool)
