@@ -4,9 +4,10 @@
 
 Wraps the stage functions of the planning pipeline (building the blends, the grid and its boxes, the solve,
 the interior check) with ``time.process_time`` and prints the split of the repeat with the least total CPU.
-Stages nest: ``blend_path`` includes the four after it, ``build_grid`` includes ``boxes_at`` and ``frames_at``;
-``_solve_grid`` waits for the solve's compiled programs. Works on any revision that has these functions
-(``PYTHONPATH=<checkout>`` for another).
+Stages nest: ``build_spans`` includes ``blend_path``, which includes the four after it, ``build_grid`` includes
+``boxes_at`` and ``frames_at``; ``_solve_grid`` waits for the solve's compiled programs. Windows without blends
+(``--corner-tol-mm 0``) take ``_plain_window`` instead of ``build_grid``, ``_solve_grid`` and ``interior_excess``.
+Works on any revision that has these functions (``PYTHONPATH=<checkout>`` for another).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections import defaultdict
 import jaxcnc.geometry.blend as blend
 import jaxcnc.geometry.path as path
 import jaxcnc.planners.grid as grid
+import jaxcnc.planners.job as job_module
 import jaxcnc.planners.topp as topp
 from jaxcnc.bench.plan import bench_machine
 from jaxcnc.bench.programs import cam_polyline
@@ -26,6 +28,7 @@ from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job
 
 STAGES = (
+    (job_module, "build_spans"),
     (path, "blend_path"),
     (blend, "_kernel"),
     (blend, "_deviation"),
@@ -36,6 +39,8 @@ STAGES = (
     (grid, "frames_at"),
     (topp, "_solve_grid"),
     (topp, "interior_excess"),
+    (topp, "_compact_device_spans"),
+    (topp, "_plain_window"),
 )
 
 
