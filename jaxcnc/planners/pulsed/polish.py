@@ -172,6 +172,23 @@ OUTER_STEPS = (0, 24)
 PAIR_OFFSETS = (1, 2)
 
 
+#: End windows (:func:`_end_windows`): the last (and first) :data:`END_GAPS` gaps of the job, between its
+#: rest and a pinned knot; each gap's count moved by these ticks per period within its range, one period more
+#: (ticks per period above that range's shortest), and the longest count of one period fewer.
+END_GAPS = 6
+END_STEPS, END_UP, END_DROPS = (0, 8, -24), (0, 12), (1,)
+
+
+def _end_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWindow) -> np.ndarray:
+    """Candidate counts ``(w, C)`` for the gaps of an end window (:data:`END_STEPS`, :data:`END_UP`,
+    :data:`END_DROPS`)."""
+    n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
+    m = snap_up_ticks(prev, n_min, n_max, idle)[1]
+    out = _steps_candidates(prev, first, window, END_STEPS, END_UP)
+    down = np.maximum(m[:, None] - np.array(END_DROPS)[None], 1) * n_max
+    return snap_up_ticks(np.maximum(np.concatenate([out, down], axis=1), first[:, None]), n_min, n_max, idle)[0]
+
+
 def polish(
     D,
     ticks,
@@ -186,6 +203,7 @@ def polish(
     half: int | None = None,
     rounds: int = 1,
     pairs: bool = True,
+    ends: bool = True,
 ):
     """Re-time windows of ``2 half + 1`` gaps jointly between pinned knot velocities (module docstring).
 
@@ -193,8 +211,9 @@ def polish(
     (boolean, or each gap's ramp fraction ``q``), ``capm`` ``(g, 3)``, ``capk`` ``(g+1, 3)`` (the caps the
     plan keeps), ``first`` ``(g,)`` each gap's shortest admissible count. ``rounds``: the later rounds only
     where the round before changed the plan. ``pairs``: then windows with two centres (:func:`_pair_windows`),
-    once. Returns ``(ticks, v, q)``: never longer in total than the plan, every gap feasible in ``bang``'s
-    model with the returned velocities and ramp fractions ``q`` ``(g,)``.
+    once; ``ends``: then the job's first and last gaps (:func:`_end_windows`). Returns ``(ticks, v, q)``:
+    never longer in total than the plan, every gap feasible in ``bang``'s model with the returned velocities
+    and ramp fractions ``q`` ``(g,)``.
     """
     ticks, v = ticks.copy(), v.copy()
     q = np.array(phase_fraction(cruise, np), dtype=np.float64)
@@ -224,7 +243,26 @@ def polish(
         near[np.clip(changed[:, None] + np.arange(-K, K + 1)[None], 0, g - 1)] = True
     if pairs:
         _pair_windows(m0, *args)
+    if ends:
+        _end_windows(*args)
     return ticks, v, q
+
+
+def _end_windows(D, ticks, v, q, capm, capk, first, A, f, window) -> None:
+    """The job's first and last :data:`END_GAPS` gaps re-timed jointly (every gap :func:`_end_candidates`).
+
+    Single and pair windows keep ``half`` gaps each side of their centres, so the gaps next to the job's
+    ends are never centres: there the optimum at rest trades periods among the last few gaps (sparse, 16
+    points from 40: the last two row gaps one period fewer each, the final one a period more, the gap before
+    the row's end 8 ticks per period longer). Two windows per job, updated in place (the second one only
+    where the job is long enough for the two to be disjoint)."""
+    g, K = ticks.shape[0], END_GAPS
+    if g < K:
+        return
+    roles = ("R",) * K
+    starts = (g - K, 0) if g >= 2 * K else (g - K,)
+    for s0 in starts:  # the job's two ends, one window each
+        _solve(np.arange(s0, s0 + K)[None], roles, D, ticks, v, q, capm, capk, first, A, f, window)
 
 
 def _single_roles(half: int, outer: str = "E") -> tuple[str, ...]:
@@ -299,6 +337,8 @@ def window_candidates(gaps, roles, ticks, q, first, window: PulseWindow) -> tupl
             c = _steps_candidates(ticks[gj], first[gj], window, PAIR_OUTER_STEPS, ())
         elif role == "E":
             c = _steps_candidates(ticks[gj], first[gj], window, OUTER_STEPS, ())
+        elif role == "R":
+            c = _end_candidates(ticks[gj], first[gj], window)
         else:
             c = ticks[gj][:, None]
         tk.append(np.repeat(c, qs.shape[1], axis=1))
