@@ -36,7 +36,9 @@ Windows centred on gaps in one residue class modulo ``2 half + 1`` are disjoint,
 class; a second round tries only the windows near the first one's changes. Then **pair windows**
 (:func:`_pair_windows`): two centres one or two gaps apart, both above their shortest count, each with a
 few counts within and below its own (and, cruising, a few ramp fractions), the gap between them longer or
-one period more, their outer neighbours a few ticks either way — the moves across two centres.
+one period more, their outer neighbours a few ticks either way — the moves across two centres. Last, **end
+windows** (:func:`_end_windows`): the job's first and last few gaps, which no centre reaches, re-timed jointly
+against the rest at the job's end (periods traded among the last gaps: one fewer on two, one more on a third).
 """
 
 from __future__ import annotations
