@@ -42,8 +42,11 @@ or two on the 2,914 gaps of a sparse cloud, less on rows).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from jaxcnc.planners.pulsed.chain import chain_ticks
@@ -55,6 +58,8 @@ ROUND_SLACK = 1e-9
 #: How many blocks of admissible tick counts of a neighbour gap the window bound enumerates (about
 #: nine periods at the documents' machine); longer neighbours are covered by the velocity bound.
 N_BLOCKS = 64
+#: Windows per block of the window bound's candidate tensors.
+WINDOW_CHUNK = 256
 #: Candidate blocks per gap in the chain bound (about 4.5 periods above the gap's own bound).
 N_CHAIN = 32
 #: Knot-speed intervals per axis in the chain bound: every axis is screened with the coarse count, the
@@ -99,28 +104,33 @@ class TravelBound:
         return self.ticks / self.tick_hz
 
 
-def tent_time_s(dist_mm, a_mm_s, b_mm_s, v_max, a_max):
+def tent_time_s(dist_mm, a_mm_s, b_mm_s, v_max, a_max, xp=np):
     """Least ``h`` with ``∫_0^h min(a + A t, b + A (h - t), V) dt >= dist`` (arrays, broadcast).
 
     ``a``, ``b`` (``<= V``) bound the speed at the start and end of the move, ``A``/``V`` the axis'
     acceleration and speed. The integrand bounds the speed of any motion with those ends from above,
     so no motion covers ``dist`` faster. Cases: one ramp only (``|a - b| > A h``), a tent, a tent cut
-    at ``V``.
+    at ``V``. ``xp``: the array module (``numpy``, or ``jax.numpy`` compiled: :func:`_tent_block`).
     """
-    D = np.asarray(dist_mm, dtype=np.float64)
-    a = np.minimum(np.asarray(a_mm_s, dtype=np.float64), v_max)
-    b = np.minimum(np.asarray(b_mm_s, dtype=np.float64), v_max)
+    D = xp.asarray(dist_mm, dtype=xp.float64)
+    a = xp.minimum(xp.asarray(a_mm_s, dtype=xp.float64), v_max)
+    b = xp.minimum(xp.asarray(b_mm_s, dtype=xp.float64), v_max)
     A, V = a_max, v_max
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    lo, hi = xp.minimum(a, b), xp.maximum(a, b)
     # one ramp from the lower end speed: G = c h + A h²/2 while A h < |a - b|
-    t_ramp = (np.sqrt(lo * lo + 2.0 * A * D) - lo) / A
+    t_ramp = (xp.sqrt(lo * lo + 2.0 * A * D) - lo) / A
     # a tent: peak u = (a + b + A h)/2, G = (2u² - a² - b²)/(2A)
-    u = np.sqrt(0.5 * (2.0 * A * D + a * a + b * b))
+    u = xp.sqrt(0.5 * (2.0 * A * D + a * a + b * b))
     t_tent = (2.0 * u - a - b) / A
     # a tent cut at V
     t_cut = (D - (2.0 * V * V - a * a - b * b) / (2.0 * A)) / V + (2.0 * V - a - b) / A
-    t = np.where(u <= V, t_tent, t_cut)
-    return np.where(A * t_ramp < hi - lo, t_ramp, t)
+    t = xp.where(u <= V, t_tent, t_cut)
+    return xp.where(A * t_ramp < hi - lo, t_ramp, t)
+
+
+#: :func:`tent_time_s` compiled, for the windows' blocks of candidates (one shape: :data:`WINDOW_CHUNK` windows
+#: × :data:`N_BLOCKS`², so one compile): fused, ~5× NumPy's passes over the ``(w, P, Q)`` arrays.
+_tent_block = jax.jit(functools.partial(tent_time_s, xp=jnp))
 
 
 def _ticks_at_least(t_s, tick_hz: float) -> np.ndarray:
@@ -298,16 +308,19 @@ def _window_bound(points, window, v_max, a_max, min_gain_ticks, feed_mm_s, rapid
         return TravelBound(total, gap, np.zeros(0, np.int64), np.zeros(0, np.int64), f)
     count = N_BLOCKS
     win = np.empty(c.shape[0], np.int64)
-    for s in range(0, c.shape[0], 256):  # bounded memory: windows × candidates × candidates
-        cs = c[s : s + 256]
-        p_lo, p_hi = _candidates(window, gap[cs - 1], count)
-        q_lo, q_hi = _candidates(window, gap[cs + 1], count)
-        best = _window_block(cs, p_lo, p_hi, q_lo, q_hi, *lim).min(axis=(1, 2))
+    for s in range(0, c.shape[0], WINDOW_CHUNK):  # bounded memory: windows × candidates × candidates
+        cs = c[s : s + WINDOW_CHUNK]
+        n = cs.shape[0]
+        padded = np.concatenate([cs, np.full(WINDOW_CHUNK - n, cs[0])])  # one shape: one compile
+        p_lo, p_hi = _candidates(window, gap[padded - 1], count)
+        q_lo, q_hi = _candidates(window, gap[padded + 1], count)
+        best = _window_block(padded, p_lo, p_hi, q_lo, q_hi, *lim, tent=_tent_block).min(axis=(1, 2))[:n]
+        p_hi, q_hi = p_hi[:n], q_hi[:n]
         # counts beyond the enumerated ones: the neighbour alone is longer than its last block, the
         # centre at least its own bound
         tail_p = p_hi[:, -1] + 1 + gap[cs] + gap[cs + 1]
         tail_q = q_hi[:, -1] + 1 + gap[cs] + gap[cs - 1]
-        win[s : s + 256] = np.minimum(best, np.minimum(tail_p, tail_q))
+        win[s : s + WINDOW_CHUNK] = np.minimum(best, np.minimum(tail_p, tail_q))
     gain = win - (gap[c - 1] + gap[c] + gap[c + 1])
     keep = _disjoint(c, gain)
     c, win = c[keep], win[keep]
@@ -338,7 +351,7 @@ def _window_ticks(c, p_ticks, q_ticks, *lim):
     return _window_block(c, p_ticks, p_ticks, q_ticks, q_ticks, *lim)
 
 
-def _window_block(c, p_lo, p_hi, q_lo, q_hi, D_vec, W, V, A, feed, rapid, f, n_min, n_max, idle):
+def _window_block(c, p_lo, p_hi, q_lo, q_hi, D_vec, W, V, A, feed, rapid, f, n_min, n_max, idle, tent=tent_time_s):
     """Like :func:`_window_ticks` for blocks ``[p_lo, p_hi]`` × ``[q_lo, q_hi]``: a bound over each block.
 
     Each of the centre's directions ``W[c]`` (the axes; with path limits also the centre gap's own) is a
@@ -360,7 +373,7 @@ def _window_block(c, p_lo, p_hi, q_lo, q_hi, D_vec, W, V, A, feed, rapid, f, n_m
         Fk = F_w[:, k][:, None]
         a = np.minimum(Fk, np.maximum(_entry_speed(Dp, p_lo, Ak, f), _entry_speed(Dp, p_hi, Ak, f)))
         b = np.minimum(Fk, np.maximum(_entry_speed(Dq, q_lo, Ak, f), _entry_speed(Dq, q_hi, Ak, f)))
-        t = tent_time_s(Dc, a[:, :, None], b[:, None, :], Vc_w[:, k][:, None, None], Ak[:, :, None])
+        t = np.asarray(tent(Dc, a[:, :, None], b[:, None, :], Vc_w[:, k][:, None, None], Ak[:, :, None]))
         t_c = np.maximum(t_c, np.where(fin[:, None, None], t, 0.0))
     d_c = snap_up_ticks(np.maximum(_ticks_at_least(t_c, f), n_min), n_min, n_max, idle)[0]
     return p_lo[:, :, None] + q_lo[:, None, :] + d_c
