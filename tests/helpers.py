@@ -50,3 +50,48 @@ def random_cubic_nurbs(n_points: int, seed: int = 0) -> tuple[int, np.ndarray, n
     w = rng.uniform(0.5, 2.0, n_points)
     knots = np.concatenate([np.zeros(4), np.linspace(0, 1, n_points - 2)[1:-1], np.ones(4)])
     return 3, pts, w, knots
+
+
+def bang_sweeps(pts: np.ndarray):
+    """``bang``'s plan of ``pts`` on the documents' glass engraver before the polish (the sweeps), and the
+    arguments :func:`~jaxcnc.planners.pulsed.polish.polish` gets:
+    ``(D, ticks, v, cruise, capm, capk, shortest, A, tick_hz, window)``."""
+    from jaxcnc.bench.pulsed import glass_engraver
+    from jaxcnc.planners.pulsed import bang
+    from jaxcnc.planners.pulsed.windows import pulse_window
+
+    w = pulse_window(glass_engraver())
+    D = np.diff(pts, axis=0)
+    f = w.tick_hz
+    A = np.full(3, 300.0)
+    capm = bang.path_caps(D, 50.0, np.full(3, 50.0))
+    capk = np.full((len(pts), 3), 30.0 / np.sqrt(3))
+    cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
+    lo = np.maximum(np.ceil(np.max(np.abs(D) / capm, axis=1) * f), w.n_min)
+    cand = bang.candidates(lo, w)
+    fwd, bwd = (bang._Gaps(D, cruise, capm, capk, bang.bucket_size(len(D)), reverse=r) for r in (False, True))
+    first = bang._sweep(fwd, bwd, cand, None, A, f, w, lookahead=bang.LOOKAHEAD)[0]
+    ticks, v, _ = bang._improve(fwd, bwd, cand, [first], A, f, w, bang.PASSES)
+    return D, ticks, v, cruise, capm, capk, cand[:, 0], A, f, w
+
+
+def window_optimum_at_rest(pts: np.ndarray, ticks: np.ndarray, max_seconds: float = 120.0) -> tuple[int, object]:
+    """The glass engraver's certified per-gap bounds summed, and the optimum at rest of the window ``pts``
+    (:func:`~jaxcnc.planners.pulsed.optimum.optimum_window` at the request's limits and path caps, started from
+    ``ticks``): ``(bound ticks, OptimumWindow)``."""
+    from jaxcnc.bench.pulsed import glass_engraver
+    from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
+    from jaxcnc.planners.pulsed.bound import lower_bound_travel
+    from jaxcnc.planners.pulsed.optimum import optimum_window
+    from jaxcnc.planners.pulsed.windows import pulse_window
+
+    machine = glass_engraver()
+    win = pulse_window(machine)
+    V, A, _ = machine_limits(machine)
+    Vr, Ar, _ = request_limits(machine)
+    lb = lower_bound_travel(pts, win, V, A, feed_mm_s=machine.path.feed, rapid_mm_s=machine.path.rapid)
+    caps = {"feed_mm_s": with_margin(machine.path.feed), "rapid_mm_s": with_margin(machine.path.rapid)}
+    opt = optimum_window(
+        pts, win, Vr, Ar, lb.gap_ticks, start_ticks=ticks, rest_ends=True, max_seconds=max_seconds, **caps
+    )
+    return int(lb.gap_ticks.sum()), opt

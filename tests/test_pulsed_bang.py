@@ -233,10 +233,8 @@ def test_polish_shorter_verified_and_within_a_percent_of_the_window_optimum(name
     """The polish (windows re-timed between pinned knot velocities) never lengthens the plan, its table is
     verified at every tick, it stays above the certified bound and within 1 % of the window optimum at rest
     (the LP's 4-step model; the lens lies partly outside it, so ``bang`` may also end below it)."""
-    from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
-    from jaxcnc.planners.pulsed import bang, pulse_window
-    from jaxcnc.planners.pulsed.bound import lower_bound_travel
-    from jaxcnc.planners.pulsed.optimum import optimum_window
+    from jaxcnc.planners.pulsed import bang
+    from tests.helpers import window_optimum_at_rest
 
     pts = _window(name, 40)
     planned = plan_points(job(pts, name), GLASS, "bang")
@@ -245,13 +243,8 @@ def test_polish_shorter_verified_and_within_a_percent_of_the_window_optimum(name
     ticks = np.diff(planned.plan.work_tick)
     assert ticks.sum() <= np.diff(before.work_tick).sum()
     assert _check_tables({"bang": planned}, GLASS) == "bang: ok"
-    win = pulse_window(GLASS)
-    V, A, _ = machine_limits(GLASS)
-    Vr, Ar, _ = request_limits(GLASS)
-    lb = lower_bound_travel(pts, win, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid)
-    caps = {"feed_mm_s": with_margin(GLASS.path.feed), "rapid_mm_s": with_margin(GLASS.path.rapid)}
-    opt = optimum_window(pts, win, Vr, Ar, lb.gap_ticks, start_ticks=ticks, rest_ends=True, max_seconds=60, **caps)
-    assert lb.gap_ticks.sum() <= ticks.sum() <= 1.01 * opt.ticks.sum()
+    bound, opt = window_optimum_at_rest(pts, ticks, max_seconds=60)
+    assert bound <= ticks.sum() <= 1.01 * opt.ticks.sum()
     assert ticks.sum() < np.diff(before.work_tick).sum()  # the polish gains on both windows
 
 
@@ -261,22 +254,11 @@ def test_polish_windows_keep_every_gap_in_the_model():
     from jaxcnc.planners.pulsed import bang
     from jaxcnc.planners.pulsed.bang import phase_fraction
     from jaxcnc.planners.pulsed.polish import polish
-    from jaxcnc.planners.pulsed.windows import pulse_window
+    from tests.helpers import bang_sweeps
 
     pts = clouds.HARD_CASES["short-rows"]()[:600]
-    w = pulse_window(GLASS)
-    D = np.diff(pts, axis=0)
-    f = w.tick_hz
-    A = np.full(3, 300.0)
-    capm = bang.path_caps(D, 50.0, np.full(3, 50.0))
-    capk = np.full((len(pts), 3), 30.0 / np.sqrt(3))
-    cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
-    lo = np.maximum(np.ceil(np.max(np.abs(D) / capm, axis=1) * f), w.n_min)
-    cand = bang.candidates(lo, w)
-    fwd, bwd = (bang._Gaps(D, cruise, capm, capk, bang.bucket_size(len(D)), reverse=r) for r in (False, True))
-    first = bang._sweep(fwd, bwd, cand, None, A, f, w, lookahead=bang.LOOKAHEAD)[0]
-    ticks, v, _ = bang._improve(fwd, bwd, cand, [first], A, f, w, bang.PASSES)
-    new, v2, q = polish(D, ticks, v, cruise, capm, capk, cand[:, 0], A, f, w)
+    D, ticks, v, cruise, capm, capk, shortest, A, f, w = bang_sweeps(pts)
+    new, v2, q = polish(D, ticks, v, cruise, capm, capk, shortest, A, f, w)
     assert new.sum() < ticks.sum()  # it gains here (jumps between the small spheres)
     assert np.any(q != phase_fraction(cruise, np))
     assert np.all(w.admissible(new, w.snap_up(new)[1]))

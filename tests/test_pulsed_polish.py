@@ -9,26 +9,9 @@ from jaxcnc.bench.pulsed import _check_tables, glass_engraver
 from jaxcnc.io import clouds
 from jaxcnc.io.points import PointJob
 from jaxcnc.planners.pulsed import bang, plan_points, polish
-from jaxcnc.planners.pulsed.windows import pulse_window
+from tests.helpers import bang_sweeps, window_optimum_at_rest
 
 GLASS = glass_engraver()
-
-
-def _sweeps(pts: np.ndarray):
-    """``bang``'s plan before the polish (the sweeps) and the arguments the polish gets."""
-    w = pulse_window(GLASS)
-    D = np.diff(pts, axis=0)
-    f = w.tick_hz
-    A = np.full(3, 300.0)
-    capm = bang.path_caps(D, 50.0, np.full(3, 50.0))
-    capk = np.full((len(pts), 3), 30.0 / np.sqrt(3))
-    cruise = np.any(np.abs(D) >= capm * capm / A, axis=1)
-    lo = np.maximum(np.ceil(np.max(np.abs(D) / capm, axis=1) * f), w.n_min)
-    cand = bang.candidates(lo, w)
-    fwd, bwd = (bang._Gaps(D, cruise, capm, capk, bang.bucket_size(len(D)), reverse=r) for r in (False, True))
-    first = bang._sweep(fwd, bwd, cand, None, A, f, w, lookahead=bang.LOOKAHEAD)[0]
-    ticks, v, _ = bang._improve(fwd, bwd, cand, [first], A, f, w, bang.PASSES)
-    return D, ticks, v, cruise, capm, capk, cand[:, 0], A, f, w
 
 
 def _each_gap_in_the_model(D, ticks, v, q, capm, capk, A, f) -> bool:
@@ -52,7 +35,7 @@ def test_pair_windows_make_the_move_across_two_centres():
     from jaxcnc.planners.pulsed.bound import lower_bound_travel
 
     pts = _two_jumps()
-    args = _sweeps(pts)
+    args = bang_sweeps(pts)
     D, ticks, _, _, capm, capk, _, A, f, w = args
     single = polish.polish(*args, rounds=1, pairs=False)[0]
     new, v2, q = polish.polish(*args)
@@ -70,22 +53,8 @@ def test_pair_move_within_half_a_percent_of_the_window_optimum():
     """On the two-jump window ``bang`` (with the polish) is verified at every tick and within 0.5 % of the
     proven optimum at rest of the LP's 4-step model (1.028 × before the pair windows; the lens lies partly
     outside that model, so ``bang`` may also end below it)."""
-    from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
-    from jaxcnc.planners.pulsed.bound import lower_bound_travel
-    from jaxcnc.planners.pulsed.optimum import optimum_window
-
-    pts = _two_jumps()
-    planned = plan_points(PointJob(pts, None, np.arange(1, len(pts) + 1), "two-jumps"), GLASS, "bang")
-    assert _check_tables({"bang": planned}, GLASS) == "bang: ok"
-    ticks = np.diff(planned.plan.work_tick)
-    win = pulse_window(GLASS)
-    V, A, _ = machine_limits(GLASS)
-    Vr, Ar, _ = request_limits(GLASS)
-    lb = lower_bound_travel(pts, win, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid)
-    caps = {"feed_mm_s": with_margin(GLASS.path.feed), "rapid_mm_s": with_margin(GLASS.path.rapid)}
-    opt = optimum_window(pts, win, Vr, Ar, lb.gap_ticks, start_ticks=ticks, rest_ends=True, max_seconds=120, **caps)
-    assert opt.proven
-    assert lb.gap_ticks.sum() <= ticks.sum() <= 1.005 * opt.ticks.sum()
+    bound, ticks, opt = _bang_and_optimum(_two_jumps(), "two-jumps", check=True)
+    assert bound <= ticks <= 1.005 * opt
 
 
 @pytest.mark.parametrize(
@@ -95,7 +64,7 @@ def test_meet_in_the_middle_equals_every_combination_propagated(roles):
     """The polish's meet in the middle finds the same feasible combinations and the same least total as
     propagating every combination through the whole window and testing the pinned exit velocity."""
     pts = clouds.HARD_CASES["sparse"]()[:400]
-    D, ticks, v, cruise, capm, capk, first, A, f, w = _sweeps(pts)
+    D, ticks, v, cruise, capm, capk, first, A, f, w = bang_sweeps(pts)
     q = np.array(bang.phase_fraction(cruise, np), dtype=np.float64)
     K = len(roles)
     gaps = np.arange(3, len(ticks) - K, K)[:, None] + np.arange(K)[None]
@@ -119,7 +88,7 @@ def test_polish_never_longer_every_gap_in_the_model_and_the_motion_within_limits
     one's in bang's model; the total is never above the sweeps' nor above the polish without pair windows
     and second round; the table's pieces run through every point within ``|a| <= A`` and each axis' cap."""
     pts = clouds.HARD_CASES[name]()[:n]
-    args = _sweeps(pts)
+    args = bang_sweeps(pts)
     D, ticks, _, _, capm, capk, _, A, f, w = args
     single = polish.polish(*args, rounds=1, pairs=False)[0]
     new, v2, q = polish.polish(*args)
@@ -181,18 +150,17 @@ def test_end_windows_trade_periods_among_the_last_gaps(monkeypatch):
 def test_end_windows_within_one_percent_of_the_window_optimum():
     """The sparse window from 40: ``bang`` within 1 % of the proven optimum at rest (1.015 × before the end
     windows; the lens lies partly outside the LP's model, so ``bang`` may also end below it)."""
-    from jaxcnc.planners.protocol import machine_limits, request_limits, with_margin
-    from jaxcnc.planners.pulsed.bound import lower_bound_travel
-    from jaxcnc.planners.pulsed.optimum import optimum_window
+    bound, ticks, opt = _bang_and_optimum(_window_from_40(), "sparse-40")
+    assert bound <= ticks <= 1.01 * opt
 
-    pts = _window_from_40()
-    planned = plan_points(PointJob(pts, None, np.arange(1, len(pts) + 1), "sparse-40"), GLASS, "bang")
+
+def _bang_and_optimum(pts: np.ndarray, name: str, check: bool = False) -> tuple[int, int, int]:
+    """``bang`` on ``pts`` alone (its table verified when ``check``) and the proven optimum at rest of the window:
+    ``(the gaps' own bounds, bang's ticks, the optimum's ticks)``."""
+    planned = plan_points(PointJob(pts, None, np.arange(1, len(pts) + 1), name), GLASS, "bang")
+    if check:
+        assert _check_tables({"bang": planned}, GLASS) == "bang: ok"
     ticks = np.diff(planned.plan.work_tick)
-    win = pulse_window(GLASS)
-    V, A, _ = machine_limits(GLASS)
-    Vr, Ar, _ = request_limits(GLASS)
-    lb = lower_bound_travel(pts, win, V, A, feed_mm_s=GLASS.path.feed, rapid_mm_s=GLASS.path.rapid)
-    caps = {"feed_mm_s": with_margin(GLASS.path.feed), "rapid_mm_s": with_margin(GLASS.path.rapid)}
-    opt = optimum_window(pts, win, Vr, Ar, lb.gap_ticks, start_ticks=ticks, rest_ends=True, max_seconds=120, **caps)
+    bound, opt = window_optimum_at_rest(pts, ticks)
     assert opt.proven
-    assert lb.gap_ticks.sum() <= ticks.sum() <= 1.01 * opt.ticks.sum()
+    return bound, int(ticks.sum()), int(opt.ticks.sum())
