@@ -115,8 +115,11 @@ def test_optimum_equals_brute_force(pts):
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "start", "n"), [("sparse", 40, 16), ("short-rows", 0, 16), ("text", 1974, 16)])
 def test_optimum_between_the_bound_and_bang(name, start, n):
-    """On hard-case windows: certified bound <= optimum (free ends) <= optimum at rest <= bang's plan of the
-    window (bang plans it from rest to rest; its ticks are the first incumbent where the LP finds them feasible)."""
+    """On hard-case windows: certified bound <= optimum (free ends) <= optimum at rest, and bang's plan of the
+    window (from rest to rest; its ticks are the first incumbent where the LP finds them feasible) above the bound
+    and within 2 % of the optimum at rest — or below it: bang's two-phase gaps use the whole lens of reachable end
+    speeds, which lies partly outside the optimum's 4-step model (the sparse window: 7600 against 7630 ticks;
+    short rows 4290 / 4286, text 6118 / 6045: the text window's last two gaps, 786 + 714 against 952 + 476)."""
     pts = clouds.HARD_CASES[name]()[start : start + n]
     planned = plan_points(PointJob(pts, None, np.arange(1, n + 1), name), GLASS, "bang")
     bang_ticks = np.diff(planned.plan.work_tick)
@@ -125,7 +128,8 @@ def test_optimum_between_the_bound_and_bang(name, start, n):
     rest = optimum_window(pts, WIN, V_REQ, A_REQ, bound.gap_ticks, start_ticks=bang_ticks, rest_ends=True, **CAPS)
     print(f"{name}: bang {bang_ticks.sum()} at rest {rest.ticks.sum()} free {opt.ticks.sum()} bound {bound.ticks}")
     assert opt.proven and rest.proven
-    assert bound.ticks <= opt.ticks.sum() <= rest.ticks.sum() <= bang_ticks.sum()
+    assert bound.ticks <= opt.ticks.sum() <= rest.ticks.sum()
+    assert bound.ticks <= bang_ticks.sum() <= 1.02 * rest.ticks.sum()
     assert feasible(pts, opt.ticks)
     assert feasible_ticks(pts - pts[0], rest.ticks, WIN.tick_hz, V_REQ, A_REQ, rest_ends=True, **CAPS)
     assert np.all(WIN.admissible(opt.ticks, opt.periods)) and np.all(WIN.admissible(rest.ticks, rest.periods))
