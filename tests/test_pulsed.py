@@ -346,6 +346,22 @@ def test_cli_plan_point_file_report_and_check(glass_toml, tmp_path, capsys):
     assert "misses point" in capsys.readouterr().out
 
 
+def test_cli_summary_names_both_bounds_and_a_single_point_plans(glass_toml, tmp_path, capsys):
+    """The printed summary gives the burn time against the plain and the certified travel-aware bound; a job of one
+    point (no interval, both bounds 0) plans, prints and checks instead of failing on the ratios."""
+    pts = tmp_path / "few.xyz"
+    write_xyz(pts, raster_job(60).points)
+    assert main(["plan", str(pts), "-m", str(glass_toml), "-o", str(tmp_path / "few.ticks")]) == 0
+    out = capsys.readouterr().out
+    assert "x the lower bound" in out and "x the certified travel-aware bound" in out
+    one = tmp_path / "one.xyz"
+    write_xyz(one, np.array([[50.0, 50.0, 20.0]]))
+    assert main(["plan", str(one), "-m", str(glass_toml), "-o", str(tmp_path / "one.ticks")]) == 0
+    out = capsys.readouterr().out
+    assert "1 points, 1 pulses" in out and "x the lower bound" not in out
+    assert main(["check", str(tmp_path / "one.ticks"), "-m", str(glass_toml)]) == 0
+
+
 def test_cli_reorder_reports_both_orders(glass_toml, tmp_path):
     job = raster_job(300)
     shuffled = job.points[np.random.default_rng(2).permutation(len(job))]
