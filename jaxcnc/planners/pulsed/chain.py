@@ -43,18 +43,19 @@ CHAIN_CHUNK = 256
 REFINE_COUNTS = 8
 
 
-def dmax(v0, v1, h, v_cap, a_max):
+def dmax(v0, v1, h, v_cap, a_max, xp=np):
     """``∫_0^h min(v0 + A t, v1 + A (h - t), Vc) dt``: the farthest a 1-D motion from ``v0`` to ``v1`` gets.
 
-    Signed speeds with ``|v0 - v1| <= A h`` and ``v0, v1 <= Vc``; arrays (NumPy or JAX), broadcast.
+    Signed speeds with ``|v0 - v1| <= A h`` and ``v0, v1 <= Vc``; arrays, broadcast. ``xp``: the array module
+    (``numpy``, or ``jax.numpy`` inside the compiled chain).
     """
     u = 0.5 * (v0 + v1 + a_max * h)  # the tent's peak
     tent = (2.0 * u * u - v0 * v0 - v1 * v1) / (2.0 * a_max)
     cut = v_cap * h - ((v_cap - v0) ** 2 + (v_cap - v1) ** 2) / (2.0 * a_max)
-    return jnp.where(u <= v_cap, tent, cut) if isinstance(u, jax.Array) else np.where(u <= v_cap, tent, cut)
+    return xp.where(u <= v_cap, tent, cut)
 
 
-def _gap_costs(d, lo, hi, edges, knot_cap, v_cap, a_max, tick_hz):
+def _gap_costs(d, lo, hi, edges, v_cap, a_max, tick_hz):
     """Costs ``(G, B, B)`` (ticks) of each gap between each pair of knot-speed intervals.
 
     ``d`` ``(G,)`` mm, ``lo``/``hi`` ``(G, C)`` the candidate blocks, ``edges`` ``(B + 1,)`` the intervals.
@@ -73,8 +74,8 @@ def _gap_costs(d, lo, hi, edges, knot_cap, v_cap, a_max, tick_hz):
         ah = a_max * h
         ok = (p0 - q1 <= ah) & (q0 - p1 <= ah)  # some pair within reach of each other
         # Dmax grows with both speeds: its largest value over the pairs in reach is at this corner
-        top = dmax(jnp.minimum(p1, q1 + ah), jnp.minimum(q1, p1 + ah), h, v_cap, a_max) + width * up
-        bot = -dmax(-jnp.maximum(p0, q0 - ah), -jnp.maximum(q0, p0 - ah), h, v_cap, a_max) - width * down
+        top = dmax(jnp.minimum(p1, q1 + ah), jnp.minimum(q1, p1 + ah), h, v_cap, a_max, jnp) + width * up
+        bot = -dmax(-jnp.maximum(p0, q0 - ah), -jnp.maximum(q0, p0 - ah), h, v_cap, a_max, jnp) - width * down
         return ok & (bot <= dd) & (dd <= top)
 
     bins = edges.shape[0] - 1
@@ -118,7 +119,7 @@ def _chain_chunk(cost_to, d, lo, hi, first, valid, knot_cap, v_cap, a_max, tick_
     ``(the same at the knot after its last valid gap, (G,) the least of them after each gap)``. ``first``
     ``(G,)``: a chain starts here (free entry speed); ``valid`` ``(G,)``: padding is skipped."""
     edges = jnp.linspace(-knot_cap, knot_cap, bins + 1)
-    costs = _gap_costs(d, lo, hi, edges, knot_cap, v_cap, a_max, tick_hz)
+    costs = _gap_costs(d, lo, hi, edges, v_cap, a_max, tick_hz)
 
     def step(carry, x):
         cost, start, keep = x
@@ -142,28 +143,26 @@ def chain_ticks(d_mm, lo, hi, start, tick_hz: float, knot_cap, v_cap, a_max, bin
     """
     g = d_mm.shape[0]
     args = (float(knot_cap), float(v_cap), float(a_max), float(tick_hz))
+    n_pad = -(-g // CHAIN_CHUNK) * CHAIN_CHUNK  # whole chunks: one shape, one compile
+
+    def padded(x, fill):
+        x = np.asarray(x)
+        return np.concatenate([x, np.full((n_pad - g, *x.shape[1:]), fill, x.dtype)])
+
+    cols = (
+        padded(np.asarray(d_mm, np.float64), 0.0),
+        padded(lo, 1),
+        padded(hi, 1),
+        padded(np.asarray(start, bool), False),
+        padded(np.ones(g, bool), False),  # padding gaps are skipped
+    )
     least = []  # the least cost after each gap: a running total over the chains
     with planning_scope():
         cost_to = jnp.zeros(bins, jnp.int64)
         for s in range(0, g, CHAIN_CHUNK):  # a few calls of one compiled program
-            n = min(CHAIN_CHUNK, g - s)
-            pad = CHAIN_CHUNK - n
-
-            def padded(x, fill, s=s, n=n, pad=pad):
-                x = np.asarray(x)
-                return np.concatenate([x[s : s + n], np.full((pad, *x.shape[1:]), fill, x.dtype)])
-
-            cost_to, after = _chain_chunk(
-                cost_to,
-                padded(np.asarray(d_mm, np.float64), 0.0),
-                padded(lo, 1),
-                padded(hi, 1),
-                padded(np.asarray(start, bool), False),
-                padded(np.ones(g, bool), False),
-                *args,
-                bins=bins,
-            )
-            least.append(np.asarray(after)[:n])
-    total = np.concatenate(least)
+            chunk = [c[s : s + CHAIN_CHUNK] for c in cols]
+            cost_to, after = _chain_chunk(cost_to, *chunk, *args, bins=bins)
+            least.append(np.asarray(after))
+    total = np.concatenate(least)[:g]
     ends = np.append(np.flatnonzero(start)[1:] - 1, g - 1)  # each chain's last gap
     return np.diff(total[ends], prepend=0)
