@@ -84,11 +84,9 @@ def _neighbour_candidates(prev: np.ndarray, first: np.ndarray, window: PulseWind
     and the shortest of the next range (and a little above it)."""
     n_min, n_max, idle = window.n_min, window.n_max, window.idle_pulses
     m = snap_up_ticks(prev, n_min, n_max, idle)[1]
-    steps = np.array(NEIGHBOUR_STEPS)[None] * m[:, None]
-    out = np.clip(prev[:, None] + steps, (m * n_min)[:, None], (m * n_max)[:, None])
-    up = ((m + 1) * n_min)[:, None] + np.array(NEIGHBOUR_UP)[None] * (m + 1)[:, None]  # one period more
+    out = _steps_candidates(prev, first, window, NEIGHBOUR_STEPS, NEIGHBOUR_UP)  # within its range, one more
     down = np.maximum(m[:, None] - np.array(NEIGHBOUR_DROPS)[None], 1) * n_max  # a neighbour that is a jump too
-    return snap_up_ticks(np.maximum(np.concatenate([out, up, down], axis=1), first[:, None]), n_min, n_max, idle)[0]
+    return snap_up_ticks(np.maximum(np.concatenate([out, down], axis=1), first[:, None]), n_min, n_max, idle)[0]
 
 
 def _forward(v_in, D, tk, qk, capm, capk, A, f):
