@@ -549,12 +549,6 @@ def _plain_window(
     delta = s_end - s_start
     curved = curved_span[local]
 
-    def padded(values: np.ndarray, fill, dtype=np.float64) -> np.ndarray:
-        out = _aligned(mb, dtype)
-        out[:m] = values
-        out[m:] = fill
-        return out
-
     def taken(source: np.ndarray, fill) -> np.ndarray:
         out = _aligned(mb, source.dtype)
         np.take(source, span, out=out[:m])
@@ -581,7 +575,7 @@ def _plain_window(
         which[n_c + n_e : q], where[n_c + n_e : q] = row, s_start[idx] + delta[idx] / 2
         only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
         pending = _frame_columns(arrays, which, where, only)
-    g = {"delta": padded(delta, 0.0), "curved": padded(curved, False, bool)}
+    g = {"delta": _pad_aligned(delta, mb, 0.0), "curved": _pad_aligned(curved, mb, False)}
     for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
         cols = np.ascontiguousarray(field[first:last].T)  # (3, window's spans)
         g[f] = _aligned((3, mb))
@@ -594,18 +588,18 @@ def _plain_window(
     cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
     g.update(
         feed=taken(req.feed_mm_s, 0.0),
-        dwell=padded(np.where(first_iv, req.dwell_s[span], 0.0), 0.0),
+        dwell=_pad_aligned(np.where(first_iv, req.dwell_s[span], 0.0), mb, 0.0),
         at_kink=taken(facts.at_kink, False),  # padding intervals: points at rest after the window
         is_point=taken(facts.is_point, True),
-        cap_first=padded(cap_first, 0.0),
-        cap_last=padded(np.where(last_iv, facts.cap_end[span], np.inf), 0.0),
+        cap_first=_pad_aligned(cap_first, mb, 0.0),
+        cap_last=_pad_aligned(np.where(last_iv, facts.cap_end[span], np.inf), mb, 0.0),
     )
     grid = _Intervals(span, s_start, delta)
     if req.hold_caps is None or len(req.hold_caps) == 0:  # no holds: one array of inf for both ends
-        g["hold_a"] = g["hold_b"] = padded(np.inf, np.inf)
+        g["hold_a"] = g["hold_b"] = _pad_aligned(np.full(m, np.inf), mb, np.inf)
     else:
         hold_a, hold_b = node_holds(req, grid)
-        g["hold_a"], g["hold_b"] = padded(hold_a, np.inf), padded(hold_b, np.inf)
+        g["hold_a"], g["hold_b"] = _pad_aligned(hold_a, mb, np.inf), _pad_aligned(hold_b, mb, np.inf)
     if idx.size:
         frames = [np.asarray(a) for a in pending]
         inner = np.ones(n_c, bool)
