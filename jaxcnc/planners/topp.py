@@ -49,7 +49,6 @@ from jaxcnc.planners.lookahead_planner import plan_lookahead
 from jaxcnc.planners.phaseplane import (
     constraint_rows,
     line_reach,
-    solve_chunked,
     solve_pieces,
     solve_window,
     window_pieces,
@@ -122,11 +121,6 @@ def jerk_cap(k_a: tuple, k_b: tuple, delta: jnp.ndarray, j_max: jnp.ndarray) -> 
 _AXIS_FIELDS = ("t_a", "k_a", "t_b", "k_b", "t_lo", "t_hi", "k_lo", "k_hi")
 
 
-#: Intervals per chunk of :func:`~jaxcnc.planners.phaseplane.solve_chunked` (at most; a power of two that
-#: divides the bucket): the rows of one chunk stay in cache between their construction and their steps.
-CHUNK_INTERVALS = 2048
-
-
 def plan_grid(
     g: dict,
     v_max,
@@ -159,14 +153,13 @@ def plan_grid(
       interval's rows, caps and pieces (:func:`_band_pieces`), then the passes and the trapezoids
       (:func:`_band_solve`); XLA would copy the divisions into each consumer of one program
       (:func:`~.phaseplane.window_pieces`): 58 → 31 ms against the chunked form;
-    * boxes: the row pairs, chunk by chunk (:func:`_plan_boxed`): with twice the pieces, materialising them
-      costs more than it saves (62 ms against 55).
+    * boxes: the row pairs, in the same two programs (``bands=False``): 96 → 64 ms against the chunked form
+      (rows built chunk by chunk inside the passes, once per pass), the same plan bit for bit (2026-11-23, a
+      131k-interval window of the 100k-block contour).
     """
     if not curved_any:
         return _plan_lines(g, v_max, a_max, chord_tol, tick_hz, x_start, axes=axes, j_max=j_max)
-    if boxed_any:
-        return _plan_boxed(g, v_max, a_max, chord_tol, tick_hz, x_start, axes=axes, j_max=j_max)
-    pieces, laws = _band_pieces(g, v_max, a_max, chord_tol, tick_hz, axes=axes, j_max=j_max)
+    pieces, laws = _band_pieces(g, v_max, a_max, chord_tol, tick_hz, axes=axes, j_max=j_max, bands=not boxed_any)
     return _band_solve(pieces, laws, x_start)
 
 
@@ -180,19 +173,21 @@ def _plan_lines(g: dict, v_max, a_max, chord_tol, tick_hz, x_start, axes: tuple[
     return out
 
 
-@partial(jax.jit, static_argnames=("axes",))
-def _band_pieces(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max) -> tuple[dict, dict]:
-    """The first program of a window without boxes: :func:`~.phaseplane.window_pieces` from the bands and
-    what the trapezoids need."""
+@partial(jax.jit, static_argnames=("axes", "bands"))
+def _band_pieces(
+    g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max, bands: bool = True
+) -> tuple[dict, dict]:
+    """The first program of a curved window: :func:`~.phaseplane.window_pieces` (from the bands where no
+    interval has a box, ``bands``; else from the row pairs) and what the trapezoids need."""
     c = _interval_rows(g, v_max, a_max, chord_tol, tick_hz, axes, j_max)
     laws = _law_inputs(c)
     laws["share"] = interval_share(g["at_kink"], g["curved"])
-    return window_pieces(c["rows"], c["delta"], c["cap_a"], bands=True), laws
+    return window_pieces(c["rows"], c["delta"], c["cap_a"], bands=bands), laws
 
 
 @jax.jit
 def _band_solve(pieces: dict, laws: dict, x_start, check: dict | None = None) -> dict:
-    """The second program of a window without boxes: the backward and forward scans, then the trapezoids;
+    """The second program of a curved window: the backward and forward scans, then the trapezoids;
     with ``check`` (:func:`_interior_bad`'s frames and ``a_max``) also each interval's ``bad``."""
     x_node, exact, k0 = solve_pieces(pieces, jnp.zeros(()), x_start)
     out = _segment_laws(laws, x_node)
@@ -248,27 +243,6 @@ def _aligned(shape: int | tuple[int, ...], dtype=np.float64) -> np.ndarray:
     raw = np.empty(size + _ALIGN, np.uint8)
     skip = -raw.ctypes.data % _ALIGN
     return raw[skip : skip + size].view(dtype).reshape(shape)
-
-
-@partial(jax.jit, static_argnames=("axes",))
-def _plan_boxed(g: dict, v_max, a_max, chord_tol, tick_hz, x_start, axes: tuple[int, ...], j_max) -> dict:
-    """:func:`plan_grid` of a window with boxes: row pairs, chunk by chunk (:func:`~.phaseplane.solve_chunked`);
-    each chunk's rows are built right before its steps and stay in cache."""
-    limits = (v_max, a_max, chord_tol, tick_hz, axes, j_max)
-    m = g["delta"].shape[0]
-    size = min(CHUNK_INTERVALS, m & -m)
-
-    def chunk_rows(i):
-        return _interval_rows(
-            {k: jax.lax.dynamic_slice_in_dim(v, i * size, size, v.ndim - 1) for k, v in g.items()}, *limits
-        )
-
-    def laws(c, x_node):
-        return _segment_laws(_law_inputs(c), x_node)
-
-    x_node, exact, k0, out = solve_chunked(chunk_rows, m // size, jnp.zeros(()), x_start, laws)
-    out.update(x_node=x_node, share=interval_share(g["at_kink"], g["curved"]), exact=exact, k0=k0)
-    return out
 
 
 def _interval_rows(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max) -> dict:
