@@ -16,7 +16,7 @@ from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import AxisConfig, MachineConfig
-from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, request_limits
+from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, coordinate_extent_mm, request_limits
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
 from jaxcnc.planners.smoothing import jerk_limited
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
@@ -119,7 +119,8 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     stop = program.stop_before[rows] & first_of_block
-    v_max, a_max, j_max = request_limits(machine)  # the machine's limits less the margin, applied here once
+    # the machine's limits less the margin, applied here once (none on v and a where rounding cannot reach them)
+    v_max, a_max, j_max = request_limits(machine, coordinate_extent_mm(spans))
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)
     try:
         with planning_scope():  # sequential passes: on the host CPU (see jaxconfig)

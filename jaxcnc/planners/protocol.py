@@ -18,6 +18,10 @@ discrete, so a plan exactly at a limit reads at the limit plus rounding. Every l
 (:attr:`PlanRequest.v_max`, ``a_max``, ``j_max``, and the same in a pulse request) is therefore the
 machine's limit times ``1 - NUMERIC_MARGIN`` already (:func:`with_margin`, applied once, by
 :func:`request_limits`): a planner plans *at* the request's limits and its table passes ``jaxcnc check``.
+Where the float64 rounding of the positions the tick stage computes provably reads inside half the
+check's own rounding slack (:func:`rounding_fits`: small coordinates, low tick rates), speed and
+acceleration get no margin: the plan runs at the machine's limits, so a time-optimal motion whose optimum
+is a whole number of ticks plans to exactly that number (a margin of any size makes it one tick longer).
 Programmed speeds (feed, rapid cap) are not machine limits and are passed as programmed. A planner's
 own discretisation allowance (``topp``'s ``GRID_MARGIN`` for what the path's derivatives do between
 grid nodes) is its business and stays inside it.
@@ -41,9 +45,50 @@ if TYPE_CHECKING:
 NUMERIC_MARGIN = 1e-5
 
 
+#: ``jaxcnc check``'s relative slack for floating-point rounding when it compares a value read on the table
+#: with a limit (:data:`jaxcnc.ticks.verify.REL_SLACK`; a test holds the two equal).
+CHECK_REL_SLACK = 1e-9
+#: How far past a whole tick a rest-to-rest group's motion may end and still be given that tick
+#: (:func:`~jaxcnc.planners.timelaw.align_to_ticks`): float sums of durations land a hair past it. The tick
+#: that ends such a group reads its last deceleration over ``1 + GROUP_END_TOL_TICKS`` ticks beside the next
+#: group's first acceleration (a reversal): ``a (1 + GROUP_END_TOL_TICKS)``, half the check's slack.
+GROUP_END_TOL_TICKS = CHECK_REL_SLACK / 2
+#: Bound on the error of a position the tick stage computes in float64 (a line's ``origin + s t``, an arc's
+#: ``centre + r (cos ψ e1 + sin ψ e2)``, a polynomial piece's origin plus its local value), in units in the
+#: last place of the largest magnitude involved (:func:`coordinate_extent_mm`). Measured: 1–2.
+POSITION_ULPS = 8
+
+
 def with_margin(limit):
     """``limit`` (a number or an array) reduced by :data:`NUMERIC_MARGIN`: what a planner may reach."""
     return limit * (1.0 - NUMERIC_MARGIN)
+
+
+def coordinate_extent_mm(spans: Spans) -> float:
+    """The largest magnitude, mm, of a coordinate the tick stage adds up while evaluating ``spans``.
+
+    The spans' extents (``lo``, ``hi``) and, for arcs, ``|centre| + radius`` (the centre of a large arc
+    may lie far outside the part).
+    """
+    extent = max(float(np.max(np.abs(spans.lo), initial=0.0)), float(np.max(np.abs(spans.hi), initial=0.0)))
+    arcs = spans.arcs
+    if len(arcs):
+        extent = max(extent, float(np.max(np.abs(arcs.center).max(axis=1) + np.abs(arcs.radius))))
+    return extent
+
+
+def rounding_fits(limit, order: int, extent_mm: float, tick_hz: float) -> np.ndarray:
+    """Whether the float64 rounding of the table's positions reads within half the check's slack of ``limit``.
+
+    The ``order``-th difference (1: speed, 2: acceleration) of positions each within ``e =
+    POSITION_ULPS · ulp(extent_mm)`` of exact is within ``2^order e`` of the exact one; divided by
+    ``tick⁻ᵒʳᵈᵉʳ`` it is a speed or acceleration error of ``2^order e f^order``. Where that is at most
+    ``CHECK_REL_SLACK / 2`` of the limit, a plan *at* the limit reads within the check's slack: the other half
+    is :data:`GROUP_END_TOL_TICKS`, the fixed-point rounding has the check's own allowance. ``limit``: a
+    number or an array (``inf`` fits).
+    """
+    error = 2.0**order * POSITION_ULPS * float(np.spacing(max(extent_mm, 1.0))) * tick_hz**order
+    return np.asarray(error <= 0.5 * CHECK_REL_SLACK * np.asarray(limit, dtype=np.float64))
 
 
 def machine_limits(machine: MachineConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -58,9 +103,20 @@ def machine_limits(machine: MachineConfig) -> tuple[np.ndarray, np.ndarray, np.n
     return tuple(np.where(np.isnan(lim[k]), np.inf, lim[k]) for k in ("v_max", "a_max", "j_max"))
 
 
-def request_limits(machine: MachineConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(v_max, a_max, j_max)`` ``(3,)`` a planner must honour: :func:`machine_limits` with the margin."""
-    return tuple(with_margin(v) for v in machine_limits(machine))
+def request_limits(machine: MachineConfig, extent_mm: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(v_max, a_max, j_max)`` ``(3,)`` a planner must honour: :func:`machine_limits` with the margin.
+
+    With ``extent_mm`` (:func:`coordinate_extent_mm` of the path), speed and acceleration limits whose
+    table readings :func:`rounding_fits` are given whole: the plan may run at the machine's limits. Jerk
+    always keeps the margin.
+    """
+    v_max, a_max, j_max = machine_limits(machine)
+    if extent_mm is None:
+        return with_margin(v_max), with_margin(a_max), with_margin(j_max)
+    f = machine.tick_hz
+    v = np.where(rounding_fits(v_max, 1, extent_mm, f), v_max, with_margin(v_max))
+    a = np.where(rounding_fits(a_max, 2, extent_mm, f), a_max, with_margin(a_max))
+    return v, a, with_margin(j_max)
 
 
 @dataclass(frozen=True, eq=False)

@@ -25,7 +25,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.planners.motion import trapezoid_position, trapezoid_speed, trapezoid_time_at, trapezoids
-from jaxcnc.planners.protocol import DeviceLaw, TimeLaw
+from jaxcnc.planners.protocol import GROUP_END_TOL_TICKS, DeviceLaw, TimeLaw
 
 __all__ = ["PLAN_KEYS", "Plan", "align_to_ticks", "plan_from_outputs", "sample_plan", "trapezoids"]
 
@@ -157,8 +157,8 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
     dur_ticks = (prof["t_acc"] + prof["t_cru"] + prof["t_dec"]) * tick_hz
     group = jnp.cumsum(rest_start.astype(jnp.int64)) - 1
     g_ticks = jax.ops.segment_sum(dur_ticks, group, num_segments=n)
-    # 1e-9 guards against ceil(5.000000000001) = 6 from rounding of the sums
-    g_whole = jnp.ceil(g_ticks - 1e-9).astype(jnp.int64)
+    # the tolerance guards against ceil(5.000000000001) = 6 from rounding of the sums (protocol's derivation)
+    g_whole = jnp.ceil(g_ticks - GROUP_END_TOL_TICKS).astype(jnp.int64)
     g_whole = jnp.maximum(g_whole, 0)
     out = dict(prof)
     dur = dur_ticks
