@@ -3,12 +3,15 @@ the general grid (:func:`~jaxcnc.planners.grid.build_grid`, ``_solve_grid``, ``i
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxcnc.planners.topp as topp
 from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline
 from jaxcnc.geometry import build_spans
+from jaxcnc.geometry.evaluate import evaluate_path
+from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.io.curves import curves_program
 from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job
@@ -79,3 +82,23 @@ def test_the_compiled_interior_check_flags_what_the_numpy_check_flags():
         flagged += int(expected.sum())
     assert flagged > 100  # the comparison saw intervals flagged, not only clean ones
     assert is_curved(spans.kind).any()
+
+
+def test_frames_from_the_separate_trig_program_are_the_same_bits():
+    """``_frame_columns`` given ``_arc_trig``'s cosines and sines (one evaluation per point) returns what it
+    returns computing them itself, bit for bit, on the arcs of a CAM contour."""
+    spans = build_spans(cam_polyline(5000), 0.0)
+    rows = np.flatnonzero(spans.kind == SpanKind.ARC)
+    arrays = topp._compact_device_spans(spans, rows)
+    rng = np.random.default_rng(3)
+    which = rng.integers(0, rows.size, 4096)
+    where = rng.uniform(-0.1, 1.1, 4096) * spans.length[rows][which]  # clipped inside, both ways
+    trig = topp._arc_trig(arrays, which, where)
+    got = [np.asarray(c) for c in topp._frame_columns(arrays, which, where, "arc", trig)]
+    alone = [np.asarray(c) for c in topp._frame_columns(arrays, which, where, "arc")]
+    _, t, k = evaluate_path(arrays, jnp.asarray(which), jnp.asarray(where), 2, xp=jnp, only="arc")
+    for a, b, c in zip(got, alone, [*np.asarray(t).T, *np.asarray(k).T], strict=True):
+        assert np.array_equal(a.view(np.int64), b.view(np.int64))
+        np.testing.assert_allclose(a, c, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="arcs alone"):
+        evaluate_path(arrays, which, where, 2, xp=jnp, trig=trig)

@@ -127,14 +127,29 @@ def _poly(a: dict, span, s, order: int, xp, polynomial: bool = False):
     return out
 
 
-def _arc(a: dict, span, s, order: int, xp):
-    """Per coordinate ``i``: ``[q_i, q_i', ...]`` on arcs and helices (absolute positions)."""
+def _arc_angle(a: dict, span, s, xp) -> tuple:
+    """``(item, r, h, ω, ψ)`` of arcs ``span`` at ``s`` (clipped to the span as :func:`evaluate_path` does)."""
     k = a["arc_radius"].shape[-1]
     item = xp.clip(a["item"][span], 0, k - 1)
     r, h = a["arc_radius"][item], a["arc_rise"][item]
     omega = 1.0 / xp.sqrt(r * r + h * h)
-    psi = s * omega
-    cos, sin = xp.cos(psi), xp.sin(psi)
+    return item, r, h, omega, s * omega
+
+
+def arc_trig(a: dict, span, s, xp: ModuleType = np) -> tuple:
+    """``(cos ψ, sin ψ)`` at ``s`` mm along arcs ``span`` (``s`` clipped to the span), the values
+    :func:`evaluate_path` uses: computed apart and handed back as its ``trig``, a compiled caller evaluates them
+    once per point (XLA's CPU backend would otherwise evaluate both again in the loop of each output column)."""
+    s = xp.clip(s, 0.0, a["length"][span])
+    psi = _arc_angle(a, span, s, xp)[4]
+    return xp.cos(psi), xp.sin(psi)
+
+
+def _arc(a: dict, span, s, order: int, xp, trig: tuple | None = None):
+    """Per coordinate ``i``: ``[q_i, q_i', ...]`` on arcs and helices (absolute positions); ``trig``: ``(cos ψ,
+    sin ψ)`` from :func:`arc_trig` (computed here when ``None``)."""
+    item, r, h, omega, psi = _arc_angle(a, span, s, xp)
+    cos, sin = (xp.cos(psi), xp.sin(psi)) if trig is None else trig
     out = []
     for i in range(3):
         e1, e2, n = a["arc_e1"][i][item], a["arc_e2"][i][item], a["arc_axis"][i][item]
@@ -151,7 +166,9 @@ def _arc(a: dict, span, s, order: int, xp):
     return out
 
 
-def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, only: str | None = None) -> tuple:
+def evaluate_path(
+    a: dict, span, s, order: int = 0, xp: ModuleType = np, only: str | None = None, trig: tuple | None = None
+) -> tuple:
     """Position and derivatives in ``s`` of span ``span[i]`` at ``s[i]`` mm from its start.
 
     Args:
@@ -161,6 +178,7 @@ def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, only: s
         only: every queried span is of one family, and the other families' formulas are skipped:
             ``"arc"`` (arcs and helices), ``"curve"`` (polynomial spans) or ``"blend"`` (polynomial
             spans whose weights are all 1: no quotient rule).
+        trig: with ``only="arc"``, :func:`arc_trig` of the same ``span`` and ``s`` (else computed here).
     Returns:
         ``(q, q', ..., q^(order))``, each ``(m, 3)`` (the broadcast shape, then 3): mm, then per mm of
         path parameter.
@@ -176,7 +194,9 @@ def evaluate_path(a: dict, span, s, order: int = 0, xp: ModuleType = np, only: s
     poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
     has_polys = a["poly_timing"].shape[-1] and only in (None, "curve", "blend")
     polys = _poly(a, span, s, order, xp, only == "blend") if has_polys else None
-    arcs = _arc(a, span, s, order, xp) if a["arc_radius"].shape[-1] and only in (None, "arc") else None
+    if trig is not None and only != "arc":
+        raise ValueError("trig is for arcs alone (only='arc')")
+    arcs = _arc(a, span, s, order, xp, trig) if a["arc_radius"].shape[-1] and only in (None, "arc") else None
     zero = xp.zeros_like(s)
     cols = [[] for _ in range(order + 1)]
     for i in range(3):

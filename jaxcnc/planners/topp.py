@@ -30,7 +30,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.errors import PlanningError
-from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
 from jaxcnc.planners.grid import (
@@ -256,12 +256,22 @@ def _interior_bad(check: dict, x_node, delta, curved, share) -> jnp.ndarray:
 
 
 @partial(jax.jit, static_argnames=("only",))
-def _frame_columns(arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None) -> tuple[jnp.ndarray, ...]:
+def _frame_columns(
+    arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None, trig: tuple | None = None
+) -> tuple[jnp.ndarray, ...]:
     """``q'`` and ``q''`` at ``s`` along spans ``span`` ``(q,)`` (:func:`~.grid.path_frame`) as six ``(q,)``
     columns (x, y, z of each): separate outputs of one fused loop (a transposed ``(3, q)`` output would make XLA
-    evaluate the frame once per row)."""
-    _, t, k = evaluate_path(arrays, span, s, 2, xp=jnp, only=only)
+    evaluate the frame once per row). ``trig``: :func:`_arc_trig` of the same points where all are on arcs."""
+    _, t, k = evaluate_path(arrays, span, s, 2, xp=jnp, only=only, trig=trig)
     return tuple(t[:, i] for i in range(3)) + tuple(k[:, i] for i in range(3))
+
+
+@jax.jit
+def _arc_trig(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """:func:`~jaxcnc.geometry.evaluate.arc_trig` ``(q,)`` as a program of its own: :func:`_frame_columns`' six
+    output loops read the angles' cosines and sines instead of evaluating them six times over (12 → 4 ms CPU
+    for 160k points)."""
+    return arc_trig(arrays, span, s, xp=jnp)
 
 
 def _pad_aligned(a: np.ndarray, n: int, fill) -> np.ndarray:
@@ -604,7 +614,8 @@ def _plain_window(
         which[n_c : n_c + n_e], where[n_c : n_c + n_e] = row[ends], s_end[idx[ends]]
         which[n_c + n_e : q], where[n_c + n_e : q] = row, s_start[idx] + delta[idx] / 2
         only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
-        pending = _frame_columns(arrays, which, where, only)
+        trig = _arc_trig(arrays, which, where) if only == "arc" else None
+        pending = _frame_columns(arrays, which, where, only, trig)
     g = {"delta": _pad_aligned(delta, mb, 0.0), "curved": _pad_aligned(curved, mb, False)}
     for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
         cols = np.ascontiguousarray(field[first:last].T)  # (3, window's spans)
