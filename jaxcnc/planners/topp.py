@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
-from jaxcnc.buckets import bucket_size, pad_rows
+from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
@@ -893,7 +893,9 @@ def _ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: float) -> dict[str, np.ndarray]:
-    """Pad the grid to a bucket, run :func:`plan_grid`, return its outputs as NumPy arrays."""
+    """Pad the grid to a bucket, run :func:`plan_grid`, return its outputs as NumPy arrays. The padded inputs are
+    :func:`_aligned` (the compiled programs read them in place: a boxed window runs six of them on the same ~30 MB,
+    which would otherwise be copied for each)."""
     machine = req.machine
     m = len(grid)
     mb = bucket_size(m)
@@ -903,26 +905,27 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
     cap_first = np.where(first, facts.cap_start[s], np.inf)
     cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
     g = {
-        "delta": pad_rows(grid.delta, mb, 0.0),
-        "curved": pad_rows(grid.curved, mb, False),
-        "boxed": pad_rows(grid.boxed, mb, False),
+        "delta": _pad_aligned(grid.delta, mb, 0.0),
+        "curved": _pad_aligned(grid.curved, mb, False),
+        "boxed": _pad_aligned(grid.boxed, mb, False),
     }
     for f in _AXIS_FIELDS:  # (3, mb): one row per axis
-        g[f] = np.zeros((3, mb))
+        g[f] = _aligned((3, mb))
         g[f][:, :m] = getattr(grid, f).T
+        g[f][:, m:] = 0.0
     g.update(
         {
-            "feed": pad_rows(req.feed_mm_s[s], mb, 0.0),
-            "dwell": pad_rows(np.where(first, req.dwell_s[s], 0.0), mb, 0.0),
+            "feed": _pad_aligned(req.feed_mm_s[s], mb, 0.0),
+            "dwell": _pad_aligned(np.where(first, req.dwell_s[s], 0.0), mb, 0.0),
             # padding intervals: points at rest after the window
-            "at_kink": pad_rows(facts.at_kink[s], mb, False),
-            "is_point": pad_rows(facts.is_point[s], mb, True),
-            "cap_first": pad_rows(cap_first, mb, 0.0),
-            "cap_last": pad_rows(np.where(last, facts.cap_end[s], np.inf), mb, 0.0),
+            "at_kink": _pad_aligned(facts.at_kink[s], mb, False),
+            "is_point": _pad_aligned(facts.is_point[s], mb, True),
+            "cap_first": _pad_aligned(cap_first, mb, 0.0),
+            "cap_last": _pad_aligned(np.where(last, facts.cap_end[s], np.inf), mb, 0.0),
         }
     )
     hold_a, hold_b = node_holds(req, grid)
-    g["hold_a"], g["hold_b"] = pad_rows(hold_a, mb, np.inf), pad_rows(hold_b, mb, np.inf)
+    g["hold_a"], g["hold_b"] = _pad_aligned(hold_a, mb, np.inf), _pad_aligned(hold_b, mb, np.inf)
     j_max = req.j_max
     out = plan_grid(
         g,
