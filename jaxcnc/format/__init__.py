@@ -20,6 +20,7 @@ from jaxcnc.format.tablefile import (
     TableHeader,
     TableWriter,
     file_sha256,
+    fixed_to_mm,
 )
 
 __all__ = [
@@ -31,4 +32,5 @@ __all__ = [
     "TableHeader",
     "TableWriter",
     "file_sha256",
+    "fixed_to_mm",
 ]

@@ -144,6 +144,20 @@ class TableHeader:
         return self.data_offset + self.n_blocks * self.block_bytes * (2 if self.has_fine else 1)
 
 
+def fixed_to_mm(pos: np.ndarray, fine: np.ndarray | None, discrete_mm: float) -> np.ndarray:
+    """Unquantised positions in mm of rows held as whole discretes ``pos`` and 2^-32 residuals ``fine`` (``None``:
+    a table without the fine channel), ``(m, n_axes)`` float64.
+
+    The one arithmetic every reader of a table uses (:meth:`TableFile.exact_mm`, the check's streamed rows) and
+    the writer derives the laser from: a tick whose midpoint falls on a raster pixel's edge lands in the same pixel
+    for both, to the last bit.
+    """
+    p = np.asarray(pos).astype(np.float64)
+    if fine is not None:
+        p = p + np.asarray(fine).astype(np.float64) / FINE_SCALE
+    return p * discrete_mm
+
+
 def file_sha256(path: str | Path) -> str | None:
     """SHA-256 (hex) of a file's bytes, as the header's ``source_sha256``/``machine_sha256`` record it;
     ``None`` when it cannot be read."""
@@ -689,7 +703,5 @@ class TableFile:
 
     def exact_mm(self, start: int = 0, stop: int | None = None) -> np.ndarray:
         """Unquantised positions (position + fine residual) of rows ``start:stop`` in mm."""
-        p = self.positions[start:stop].astype(np.float64)
-        if self._fine is not None:
-            p = p + self.fine[start:stop].astype(np.float64) / FINE_SCALE
-        return p * self.header.discrete_mm
+        fine = self.fine[start:stop] if self._fine is not None else None
+        return fixed_to_mm(self.positions[start:stop], fine, self.header.discrete_mm)

@@ -13,7 +13,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 import jaxcnc
-from jaxcnc.format import EVENT_DTYPE, EventKind, TableWriter, file_sha256
+from jaxcnc.format import EVENT_DTYPE, EventKind, TableWriter, file_sha256, fixed_to_mm
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners.job import PlannedJob
@@ -148,7 +148,10 @@ def write_samples(
             pos, fine = quantize(p, m.discrete_mm)
             lit = None
             if power:
-                pa = np.vstack([p, after])
+                # the laser from the positions as the table holds them, the ones the check reads: a tick on a raster
+                # pixel's edge, or an M4 speed, comes out the same for both to the last bit
+                pos_a, fine_a = quantize(after, m.discrete_mm)
+                pa = fixed_to_mm(np.vstack([pos, pos_a]), np.vstack([fine, fine_a]), m.discrete_mm)
                 lit = power_of_rows(pa, events_out, first, m.tick_hz, m.laser)
                 if power_scale is not None:
                     lit = (lit * power_scale(pa)).astype(np.float32)

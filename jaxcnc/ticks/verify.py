@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from jaxcnc.errors import TableFileError
-from jaxcnc.format import FINE_SCALE, TableFile
+from jaxcnc.format import FINE_SCALE, TableFile, fixed_to_mm
 from jaxcnc.machine import MachineConfig
 
 #: Relative slack for floating-point rounding when comparing with a limit.
@@ -136,10 +136,7 @@ class TableRows:
         """Unquantised positions (discretes + fine residual) of rows ``start:stop`` in mm, ``(m, n_axes)``
         float64 — the same values as :meth:`TableFile.exact_mm`."""
         pos, fine = self.read(start, stop)
-        p = pos.astype(np.float64)
-        if fine is not None:
-            p = p + fine.astype(np.float64) / FINE_SCALE
-        return p * self.header.discrete_mm
+        return fixed_to_mm(pos, fine, self.header.discrete_mm)
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
