@@ -69,6 +69,9 @@ class Grid:
         boxed: ``(m,)`` bool, the interval has a box (blends): ``t_lo ≤ q' ≤ t_hi`` and
             ``k_lo ≤ q'' ≤ k_hi`` ``(m, 3)`` componentwise everywhere inside it (elsewhere copies of
             the start's values, unused).
+        axis_major: the eight ``(m, 3)`` fields' storage, ``{name: (3, mb)}`` arrays aligned to
+            ``ALIGN_BYTES`` and padded with zeros to ``mb ≥ m`` columns (each field is ``axis_major[name][:, :m].T``):
+            the layout the planner's compiled programs read, in place.
     """
 
     span: np.ndarray
@@ -84,9 +87,25 @@ class Grid:
     t_hi: np.ndarray
     k_lo: np.ndarray
     k_hi: np.ndarray
+    axis_major: dict[str, np.ndarray] | None = None
 
     def __len__(self) -> int:
         return int(self.span.shape[0])
+
+
+#: The grid's ``(m, 3)`` fields, stored axis-major (see :attr:`Grid.axis_major`).
+AXIS_FIELDS = ("t_a", "k_a", "t_b", "k_b", "t_lo", "t_hi", "k_lo", "k_hi")
+#: Alignment (bytes) at which the CPU backend takes a NumPy array without copying it (``jax.device_put``).
+ALIGN_BYTES = 64
+
+
+def aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
+    """A float64 array of zeros whose data start on an ``ALIGN_BYTES`` boundary (read in place by a compiled
+    program; an unaligned array is copied on every call)."""
+    size = int(np.prod(shape)) * 8
+    raw = np.zeros(size + ALIGN_BYTES, np.uint8)
+    skip = -raw.ctypes.data % ALIGN_BYTES
+    return raw[skip : skip + size].view(np.float64).reshape(shape)
 
 
 def is_curved(kind: np.ndarray) -> np.ndarray:
@@ -178,15 +197,32 @@ def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) 
     for fewer rows, in one call padded to a bucket: few compiled sizes either way.
     """
     q = span.size
+    out = [np.empty((3, q)) for _ in range(8)]
+    _boxes_into(arrays, span, s0, delta, out, np.arange(q))
+    return tuple(o.T for o in out)
+
+
+def _boxes_into(
+    arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray, out: list[np.ndarray], cols: np.ndarray
+) -> None:
+    """:func:`boxes_at` written straight into columns ``cols`` ``(q,)`` of eight axis-major ``(3, n)`` arrays
+    ``out`` (no joined ``(q, 3)`` results to scatter afterwards)."""
+    q = span.size
     m = BOX_CHUNK if q > BOX_CHUNK and on_cpu() else bucket_size(q)
     n = max(-(-q // m), 1) * m
     which, a, d = np.zeros(n, np.int64), np.zeros(n), np.zeros(n)
     which[:q], a[:q], d[:q] = span, s0, delta
     which[q:] = span[0] if q else 0
     parts = [_boxes(arrays, which[i : i + m], a[i : i + m], d[i : i + m]) for i in range(0, n, m)]
-    if len(parts) == 1:
-        return tuple(np.asarray(x)[:q] for x in parts[0])
-    return tuple(np.concatenate([np.asarray(p[j]) for p in parts])[:q] for j in range(8))
+    for i, part in zip(range(0, n, m), parts, strict=True):
+        k = min(m, q - i)
+        if k <= 0:
+            break
+        at = cols[i : i + k]
+        for dest, res in zip(out, part, strict=True):
+            res = np.asarray(res)
+            for axis in range(3):
+                dest[axis, at] = res[:k, axis]
 
 
 def cut_spans(
@@ -206,53 +242,56 @@ def cut_spans(
 
 
 def build_grid(
-    spans: Spans, counts: np.ndarray, arrays: dict | None = None, first: int = 0, last: int | None = None
+    spans: Spans,
+    counts: np.ndarray,
+    arrays: dict | None = None,
+    first: int = 0,
+    last: int | None = None,
+    pad_to: int | None = None,
 ) -> Grid:
     """Cut spans ``first..last-1`` (all by default) into ``counts[k]`` equal intervals each and evaluate the
     frame at their ends.
 
     ``arrays``: :func:`device_spans` of ``spans`` for the same ``first``, ``last`` when the caller has them
-    already (row 0 is span ``first``).
+    already (row 0 is span ``first``). ``pad_to``: columns of :attr:`Grid.axis_major` (at least the
+    interval count; by default that count).
     """
     last = len(spans) if last is None else last
     span, s_start, s_end = cut_spans(spans.length, counts, first, last)
+    m = span.size
     local = span - first
     delta = s_end - s_start
-    curved = is_curved(spans.kind[span])
-    boxed = spans.kind[span] == SpanKind.BLEND
-    t_a = np.array(spans.tangent_in[span])
-    t_b = np.array(spans.tangent_out[span])
-    k_a = np.zeros_like(t_a)
-    k_b = np.zeros_like(t_b)
+    kind = spans.kind[span]
+    curved = is_curved(kind)
+    boxed = kind == SpanKind.BLEND
+    major = {f: aligned_zeros((3, m if pad_to is None else pad_to)) for f in AXIS_FIELDS}
+    for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
+        cols = np.ascontiguousarray(field[first:last].T)  # (3, the window's spans)
+        for i in range(3):
+            np.take(cols[i], local, out=major[f][i, :m])
     plain = np.flatnonzero(curved & ~boxed)
     box = np.flatnonzero(boxed)
     if plain.size or box.size:
         arrays = device_spans(spans, first, last) if arrays is None else arrays
     if plain.size:
-        only = "arc" if np.all(spans.kind[span[plain]] == SpanKind.ARC) else None
+        only = "arc" if np.all(kind[plain] == SpanKind.ARC) else None
         where = np.concatenate([s_start[plain], s_end[plain]])
         t, k = frames_at(arrays, np.concatenate([local[plain]] * 2), where, only=only)
-        t_a[plain], t_b[plain] = t[: plain.size], t[plain.size :]
-        k_a[plain], k_b[plain] = k[: plain.size], k[plain.size :]
-    t_lo, t_hi, k_lo, k_hi = t_a.copy(), t_a.copy(), k_a.copy(), k_a.copy()
+        for f, d, rows in (("t_a", t, 0), ("t_b", t, 1), ("k_a", k, 0), ("k_b", k, 1)):
+            for i in range(3):
+                major[f][i, plain] = d[rows * plain.size : (rows + 1) * plain.size, i]
+    for f, like in (("t_lo", "t_a"), ("t_hi", "t_a"), ("k_lo", "k_a"), ("k_hi", "k_a")):
+        major[f][:, :m] = major[like][:, :m]  # copies of the start's values where there is no box
     if box.size:
-        t_a[box], k_a[box], t_b[box], k_b[box], t_lo[box], t_hi[box], k_lo[box], k_hi[box] = boxes_at(
-            arrays, local[box], s_start[box], delta[box]
-        )
+        _boxes_into(arrays, local[box], s_start[box], delta[box], [major[f] for f in AXIS_FIELDS], box)
     return Grid(
         span=span,
         s_start=s_start,
         delta=delta,
-        t_a=t_a,
-        k_a=k_a,
-        t_b=t_b,
-        k_b=k_b,
         curved=curved,
         boxed=boxed,
-        t_lo=t_lo,
-        t_hi=t_hi,
-        k_lo=k_lo,
-        k_hi=k_hi,
+        axis_major=major,
+        **{f: major[f][:, :m].T for f in AXIS_FIELDS},
     )
 
 

@@ -532,7 +532,7 @@ def _solve_refined(
             grid, out = _plain_window(req, facts, counts, arrays, curved, compact, first, last, x_start)
             bad = out.pop("bad")[: len(grid)] if "bad" in out else np.zeros(len(grid), bool)
         else:
-            grid = build_grid(req.spans, counts, arrays, first, last)
+            grid = build_grid(req.spans, counts, arrays, first, last, pad_to=bucket_size(int(counts[first:last].sum())))
             out = _solve_grid(req, facts, grid, x_start)
             acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
             bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first)
@@ -910,9 +910,13 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
         "boxed": _pad_aligned(grid.boxed, mb, False),
     }
     for f in _AXIS_FIELDS:  # (3, mb): one row per axis
-        g[f] = _aligned((3, mb))
-        g[f][:, :m] = getattr(grid, f).T
-        g[f][:, m:] = 0.0
+        major = None if grid.axis_major is None else grid.axis_major[f]
+        if major is not None and major.shape[1] == mb:  # built in this layout (zero padding): read in place
+            g[f] = major
+        else:
+            g[f] = _aligned((3, mb))
+            g[f][:, :m] = getattr(grid, f).T
+            g[f][:, m:] = 0.0
     g.update(
         {
             "feed": _pad_aligned(req.feed_mm_s[s], mb, 0.0),
