@@ -389,20 +389,23 @@ def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
     return {k: out[k] for k in ("group_tick", "offset_ticks", "first_tick", "n_ticks")}
 
 
-def interior_excess(arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray, first: int = 0) -> np.ndarray:
+def interior_excess(
+    arrays: dict, grid: Grid, x_node: np.ndarray, acc: np.ndarray, first: int = 0, only: str | None = None
+) -> np.ndarray:
     """``(m,)`` bool: on a curved interval the planned acceleration may exceed the budget inside.
 
     The limit holds at both ends by construction. Inside, ``q̈ = T(s) u + K(s) x(s)`` is
     evaluated at the midpoint too; the parabola through the three values bounds it (``T``, ``K``
     vary smoothly and little on an interval), and an interval whose parabola peaks above
     ``1 - GRID_MARGIN/2`` of the budget is cut finer. ``arrays``: :func:`~jaxcnc.planners.grid.device_spans`
-    of the spans from ``first`` on (row 0 is span ``first``).
+    of the spans from ``first`` on (row 0 is span ``first``); ``only``: as :func:`~.grid.frames_at`'s (``"arc"``
+    where every curved interval without a box lies on an arc: the same values, a third of the work).
     """
     idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
     bad = np.zeros(len(grid), bool)
     if idx.size == 0:
         return bad
-    t_m, k_m = frames_at(arrays, grid.span[idx] - first, grid.s_start[idx] + grid.delta[idx] / 2)
+    t_m, k_m = frames_at(arrays, grid.span[idx] - first, grid.s_start[idx] + grid.delta[idx] / 2, only=only)
     xa, xb = x_node[idx], x_node[idx + 1]
     u = (xb - xa) / (2.0 * grid.delta[idx])
     a0 = grid.t_a[idx] * u[:, None] + grid.k_a[idx] * xa[:, None]
@@ -535,7 +538,8 @@ def _solve_refined(
             grid = build_grid(req.spans, counts, arrays, first, last, pad_to=bucket_size(int(counts[first:last].sum())))
             out = _solve_grid(req, facts, grid, x_start)
             acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
-            bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first)
+            arcs = np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC)
+            bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first, "arc" if arcs else None)
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
