@@ -5,9 +5,10 @@
 Wraps the stage functions of the planning pipeline (building the blends, the grid and its boxes, the solve,
 the interior check) with ``time.process_time`` and prints the split of the repeat with the least total CPU.
 Stages nest: ``build_spans`` includes ``blend_path``, which includes the four after it, ``build_grid`` includes
-``boxes_at`` and ``frames_at``; ``_solve_grid`` waits for the solve's compiled programs. Windows without blends
-(``--corner-tol-mm 0``) take ``_plain_window`` instead of ``build_grid``, ``_solve_grid`` and ``interior_excess``.
-Works on any revision that has these functions (``PYTHONPATH=<checkout>`` for another).
+``boxes_at`` (``_boxes_into`` from b938340 on) and ``frames_at``; ``_solve_grid`` waits for the solve's compiled
+programs. Windows without blends (``--corner-tol-mm 0``) take ``_plain_window`` instead of ``build_grid``,
+``_solve_grid`` and ``interior_excess``. Works on any revision that has these functions
+(``PYTHONPATH=<checkout>`` for another).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ STAGES = (
     (blend, "_trim"),
     (topp, "build_grid"),
     (grid, "boxes_at"),
+    (grid, "_boxes_into"),
     (grid, "frames_at"),
     (topp, "_solve_grid"),
     (topp, "interior_excess"),
