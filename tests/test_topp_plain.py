@@ -3,6 +3,7 @@ the general grid (:func:`~jaxcnc.planners.grid.build_grid`, ``_solve_grid``, ``i
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -102,3 +103,44 @@ def test_frames_from_the_separate_trig_program_are_the_same_bits():
         np.testing.assert_allclose(a, c, rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="arcs alone"):
         evaluate_path(arrays, which, where, 2, xp=jnp, trig=trig)
+
+
+def test_the_curved_intervals_check_flags_what_the_numpy_check_flags(monkeypatch):
+    """The plain windows' interior check (:func:`topp._curved_excess`, curved intervals alone, moving axes alone,
+    read from the nodes' frames) flags what the NumPy check on the general grid flags, with speeds raised above
+    the plan so that some intervals exceed their budget inside."""
+    prog = cam_polyline(600)
+    machine = parse_machine(BENCH_MACHINE + "corner_tol_mm = 0\n", "<bench>")
+    seen = []
+    solve = topp._plain_solve
+
+    def spy(*args, **kwargs):
+        seen.append((args, kwargs))
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(topp, "_plain_solve", spy)
+    job = plan_job(prog, machine)
+    assert len(seen) == 1  # one window, no refinement
+    args, kwargs = seen[0]
+    _, laws, _, frames, check = args[:5]
+    axes = args[5] if len(args) > 5 else kwargs["axes"]
+    spans = build_spans(prog, 0.0)
+    arrays = device_spans(spans)
+    grid = build_grid(spans, interval_counts(spans), arrays)
+    m = len(grid)
+    assert np.array_equal(grid.span, job.plan.span)
+    idx = np.flatnonzero(grid.curved)
+    x = np.append(job.plan.v0, job.plan.v1[-1]) ** 2
+    share = np.asarray(laws["share"])[:m]
+    acc = np.minimum(np.asarray(check["a_max"]), BIG)[None, :] * share[:, None]
+    excess = jax.jit(topp._curved_excess, static_argnames=("axes",))
+    flagged = 0
+    for scale in (0.5, 1.0, 1.02, 1.2, 2.0):
+        x_pad = np.zeros(np.asarray(laws["delta"]).size + 1)
+        x_pad[: m + 1] = x * scale
+        got = np.asarray(excess(x_pad, laws, frames, check, axes=axes))
+        expected = topp.interior_excess(arrays, grid, x * scale, acc)
+        np.testing.assert_array_equal(got[: idx.size], expected[idx], err_msg=f"scale {scale}")
+        assert not got[idx.size :].any() and not expected[np.flatnonzero(~grid.curved)].any()
+        flagged += int(expected.sum())
+    assert flagged > 100

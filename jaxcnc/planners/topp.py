@@ -71,19 +71,34 @@ MAX_HOLD_CUTS = 4096
 JERK_SHARE = 0.5
 
 
-def speed_cap(t: tuple, k: tuple, v_max: tuple, feed: jnp.ndarray, chord_tol_mm, tick_hz) -> jnp.ndarray:
+def speed_cap(
+    t: tuple, k: tuple, v_max: tuple, feed: jnp.ndarray, chord_tol_mm, tick_hz, v_chord: jnp.ndarray | None = None
+) -> jnp.ndarray:
     """``(m,)`` cap on ``x = ṡ²`` at nodes with ``q' = t``, ``q'' = k``: axis speeds, feed, chord error.
 
     ``t``, ``k``: one ``(m,)`` column per axis (x, y, z); ``v_max``: per axis, each a scalar or ``(m,)``.
     The tool moves at ``|q'| ṡ``, axis ``i`` at ``|q'_i| ṡ``; the curvature is ``|q' × q''| / |q'|³``.
+    ``v_chord``: :func:`node_chord_speed` of ``t``, ``k`` where a program before computed it (else here).
     """
     x_axis = _axis_speed_cap(tuple(jnp.abs(c) for c in t), v_max)
+    speed, safe, kappa = _curvature(t, k)
+    v_chord = chord_speed(kappa, chord_tol_mm, tick_hz) if v_chord is None else v_chord
+    v_tool = jnp.minimum(feed, v_chord)  # the tool's own speed caps
+    return jnp.minimum(x_axis, jnp.where(speed > 0, (v_tool / safe) ** 2, jnp.inf))
+
+
+def _curvature(t: tuple, k: tuple) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """``(|q'|, |q'|`` or 1 where 0, the curvature ``|q' × q''| / |q'|³)`` from columns ``t``, ``k`` (``(m,)`` each)."""
     speed = jnp.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
     safe = jnp.where(speed > 0, speed, 1.0)
     cross = (t[1] * k[2] - t[2] * k[1], t[2] * k[0] - t[0] * k[2], t[0] * k[1] - t[1] * k[0])
-    kappa = jnp.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2) / safe**3
-    v_tool = jnp.minimum(feed, chord_speed(kappa, chord_tol_mm, tick_hz))  # the tool's own speed caps
-    return jnp.minimum(x_axis, jnp.where(speed > 0, (v_tool / safe) ** 2, jnp.inf))
+    return speed, safe, jnp.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2) / safe**3
+
+
+def node_chord_speed(t: tuple, k: tuple, chord_tol_mm, tick_hz) -> jnp.ndarray:
+    """``(m,)`` :func:`~jaxcnc.planners.limits.chord_speed` at nodes with ``q' = t``, ``q'' = k`` (columns), as
+    :func:`speed_cap` computes it (``inf`` where the curvature is 0: on every line)."""
+    return chord_speed(_curvature(t, k)[2], chord_tol_mm, tick_hz)
 
 
 def _axis_speed_cap(t_abs: tuple, v_max: tuple) -> jnp.ndarray:
@@ -180,10 +195,13 @@ def _plan_lines(g: dict, v_max, a_max, chord_tol, tick_hz, x_start, axes: tuple[
 
 
 @partial(jax.jit, static_argnames=("axes",))
-def _band_pieces(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max) -> tuple[dict, dict]:
+def _band_pieces(
+    g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max, caps: dict | None = None
+) -> tuple[dict, dict]:
     """The first program of a window without boxes: :func:`~.phaseplane.window_pieces` from the bands and
-    what the trapezoids need."""
-    c = _interval_rows(g, v_max, a_max, chord_tol, tick_hz, axes, j_max)
+    what the trapezoids need. ``caps``: :func:`_interval_caps` of ``g``, made by an earlier program (XLA would
+    copy their square roots and arc sines into each consumer here; see :func:`_box_pieces`)."""
+    c = _interval_rows(g, v_max, a_max, chord_tol, tick_hz, axes, j_max, caps)
     laws = _law_inputs(c)
     laws["share"] = interval_share(g["at_kink"], g["curved"])
     return window_pieces(c["rows"], c["delta"], c["cap_a"], bands=True), laws
@@ -242,28 +260,43 @@ def _interior_bad(check: dict, x_node, delta, curved, share) -> jnp.ndarray:
     """:func:`interior_excess` of a window without boxes, compiled over all ``(m,)`` intervals with the same
     operations (lines and points masked): ``check`` holds ``t_a, k_a, t_b, k_b`` and ``t_m, k_m`` (``q'``, ``q''``
     at the intervals' midpoints) as ``(3, m)`` and ``a_max`` ``(3,)``."""
-    xa, xb = x_node[:-1], x_node[1:]
     on = curved & (delta > 0)
+    frame = tuple(check[f] for f in ("t_a", "k_a", "t_m", "k_m", "t_b", "k_b"))
+    return _excess(frame, x_node[:-1], x_node[1:], delta, on, check["a_max"], share, range(3))
+
+
+def _excess(frame: tuple, xa, xb, delta, on, a_max, share, axes) -> jnp.ndarray:
+    """The interior check (:func:`interior_excess`) of intervals ``(n,)``: ``frame`` = ``t_a, k_a, t_m, k_m, t_b,
+    k_b``, each ``(3, n)`` (rows x, y, z); ``xa``, ``xb``: ``x`` at the ends; ``on``: the intervals checked; only
+    the rows of ``axes`` are read (the others' acceleration rows are left out of the solve as well)."""
     u = (xb - xa) / (2.0 * jnp.where(on, delta, 1.0))
-    a0 = check["t_a"] * u + check["k_a"] * xa
-    am = check["t_m"] * u + check["k_m"] * ((xa + xb) / 2)
-    a1 = check["t_b"] * u + check["k_b"] * xb
-    lin, quad = -3.0 * a0 + 4.0 * am - a1, 2.0 * a0 - 4.0 * am + 2.0 * a1
-    tau = jnp.clip(jnp.nan_to_num(-lin / (2.0 * quad), nan=0.0), 0.0, 1.0)
-    peak = jnp.maximum(jnp.abs(a0 + lin * tau + quad * tau**2), jnp.abs(am))
-    acc = jnp.minimum(check["a_max"], BIG)[:, None] * share[None, :]
-    return on & jnp.any(peak > acc * (1.0 - GRID_MARGIN / 2) / (1.0 - GRID_MARGIN), axis=0)
+    bad = jnp.zeros(on.shape, bool)
+    for i in axes:
+        t_a, k_a, t_m, k_m, t_b, k_b = (f[i] for f in frame)
+        a0 = t_a * u + k_a * xa
+        am = t_m * u + k_m * ((xa + xb) / 2)
+        a1 = t_b * u + k_b * xb
+        lin, quad = -3.0 * a0 + 4.0 * am - a1, 2.0 * a0 - 4.0 * am + 2.0 * a1
+        tau = jnp.clip(jnp.nan_to_num(-lin / (2.0 * quad), nan=0.0), 0.0, 1.0)
+        peak = jnp.maximum(jnp.abs(a0 + lin * tau + quad * tau**2), jnp.abs(am))
+        acc = jnp.minimum(a_max[i], BIG) * share
+        bad = bad | (peak > acc * (1.0 - GRID_MARGIN / 2) / (1.0 - GRID_MARGIN))
+    return on & bad
 
 
 @partial(jax.jit, static_argnames=("only",))
 def _frame_columns(
-    arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None, trig: tuple | None = None
+    arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None, trig: tuple | None = None, chord=None
 ) -> tuple[jnp.ndarray, ...]:
     """``q'`` and ``q''`` at ``s`` along spans ``span`` ``(q,)`` (:func:`~.grid.path_frame`) as six ``(q,)``
     columns (x, y, z of each): separate outputs of one fused loop (a transposed ``(3, q)`` output would make XLA
-    evaluate the frame once per row). ``trig``: :func:`_arc_trig` of the same points where all are on arcs."""
+    evaluate the frame once per row). ``trig``: :func:`_arc_trig` of the same points where all are on arcs.
+    ``chord``: ``(chord_tol_mm, tick_hz)`` to append :func:`node_chord_speed` at the points as a seventh column
+    (its arc sine costs more than the rest of an interval's caps: once per curved node here, instead of at both
+    ends of every interval)."""
     _, t, k = evaluate_path(arrays, span, s, 2, xp=jnp, only=only, trig=trig)
-    return tuple(t[:, i] for i in range(3)) + tuple(k[:, i] for i in range(3))
+    cols = tuple(t[:, i] for i in range(3)) + tuple(k[:, i] for i in range(3))
+    return cols if chord is None else cols + (node_chord_speed(cols[:3], cols[3:], *chord),)
 
 
 @jax.jit
@@ -305,8 +338,8 @@ def _interval_caps(g: dict, v_max, chord_tol, tick_hz, j_max) -> dict:
     curved = g["curved"]
     vel_share = jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
     vel = tuple(jnp.minimum(v_max[i], BIG) * vel_share for i in range(3))
-    vcap_a = speed_cap(col["t_a"], col["k_a"], vel, g["feed"], chord_tol, tick_hz)
-    vcap_b = speed_cap(col["t_b"], col["k_b"], vel, g["feed"], chord_tol, tick_hz)
+    vcap_a = speed_cap(col["t_a"], col["k_a"], vel, g["feed"], chord_tol, tick_hz, g.get("chord_a"))
+    vcap_b = speed_cap(col["t_b"], col["k_b"], vel, g["feed"], chord_tol, tick_hz, g.get("chord_b"))
     if boxed:  # in a box the axis speeds and the feed are capped everywhere inside, not at the ends alone
         vcap_box = box_speed_cap(col["t_lo"], col["t_hi"], vel, g["feed"])
         vcap_a = jnp.where(g["boxed"], jnp.minimum(vcap_a, vcap_box), vcap_a)
@@ -577,36 +610,30 @@ def _plain_window(
     x_start: float,
 ) -> tuple[_Intervals, dict[str, np.ndarray]]:
     """:func:`build_grid`, :func:`_solve_grid` and :func:`interior_excess` of a window without blends (no boxes):
-    the same values, made straight in the padded axis-major ``(3, mb)`` layout the compiled programs read.
+    the same values, bit for bit, made by compiled programs from the window's span arrays.
 
     The frames are evaluated once per node (an interval's end is the next one's start on the same span: the
-    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call; the interior check runs in the
-    solve's second program (:func:`_interior_bad`) and comes back as ``out["bad"]``. ``curved_span``: ``(last -
-    first,)`` which of the window's spans are curved; ``arrays``: :func:`_compact_device_spans` of those alone
-    (``None`` without curves), the window's span ``k`` their row ``compact[k]``.
+    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call (:func:`_frame_columns`, the
+    arcs' cosines and sines from :func:`_arc_trig`, the chord speed at the nodes with them);
+    :func:`_plain_inputs` gathers each interval's fields from its span's (or its nodes' frames) into the padded
+    axis-major ``(3, mb)`` layout, :func:`_interval_caps` and :func:`_band_pieces` follow, and :func:`_plain_solve`
+    runs the passes and the interior check of the curved intervals (on the moving axes), which comes back as
+    ``out["bad"]``. ``curved_span``: ``(last - first,)`` which of the window's spans are curved; ``arrays``:
+    :func:`_compact_device_spans` of those alone (``None`` without curves), the window's span ``k`` their row
+    ``compact[k]``. Measured on the 100k-block contour with exact corners (2026-11-23, CPU at load 5): 142 ms
+    a plan with the inputs made by NumPy and every cap and check over all intervals, 97-102 ms so.
     """
     spans = req.spans
     span, s_start, s_end = cut_spans(spans.length, counts, first, last)
     local = span - first
-    m = span.size
-    mb = bucket_size(m)
+    m, ns = span.size, last - first
+    mb = bucket_size(m)  # the window's spans are padded to mb rows too (ns <= m): one shape per bucket
     delta = s_end - s_start
     curved = curved_span[local]
-
-    def taken(source: np.ndarray, fill) -> np.ndarray:
-        out = _aligned(mb, source.dtype)
-        np.take(source, span, out=out[:m])
-        out[m:] = fill
-        return out
-
-    def zeros() -> np.ndarray:
-        out = _aligned((3, mb))
-        out[...] = 0.0
-        return out
-
     idx = np.flatnonzero(curved)
-    last_iv = np.append(span[1:] != span[:-1], True)  # the last interval of its span
+    frames = None
     if idx.size:  # dispatched first: the frames are evaluated while the other inputs are made here
+        last_iv = np.append(span[1:] != span[:-1], True)  # the last interval of its span
         ends = np.flatnonzero(last_iv[idx])
         n_c, n_e = idx.size, ends.size
         # nodes: every curved interval's start and each curved span's end; then the midpoints
@@ -619,46 +646,33 @@ def _plain_window(
         which[n_c + n_e : q], where[n_c + n_e : q] = row, s_start[idx] + delta[idx] / 2
         only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
         trig = _arc_trig(arrays, which, where) if only == "arc" else None
-        pending = _frame_columns(arrays, which, where, only, trig)
-    g = {"delta": _pad_aligned(delta, mb, 0.0), "curved": _pad_aligned(curved, mb, False)}
-    for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
-        cols = np.ascontiguousarray(field[first:last].T)  # (3, window's spans)
-        g[f] = _aligned((3, mb))
-        for i in range(3):
-            np.take(cols[i], local, out=g[f][i, :m])
-        g[f][:, m:] = 0.0
-    g["k_a"], g["k_b"] = zeros(), zeros()
-    first_iv = s_start == 0
-    cap_first = np.where(first_iv, facts.cap_start[span], np.inf)
-    cap_first[0] = x_start  # where the window before left the motion (rest at the program's start)
-    g.update(
-        feed=taken(req.feed_mm_s, 0.0),
-        dwell=_pad_aligned(np.where(first_iv, req.dwell_s[span], 0.0), mb, 0.0),
-        at_kink=taken(facts.at_kink, False),  # padding intervals: points at rest after the window
-        is_point=taken(facts.is_point, True),
-        cap_first=_pad_aligned(cap_first, mb, 0.0),
-        cap_last=_pad_aligned(np.where(last_iv, facts.cap_end[span], np.inf), mb, 0.0),
-    )
+        rank = np.cumsum(curved) - 1  # a curved interval's start node is frame rank[i], its midpoint q - n_c + rank[i]
+        chord = (req.machine.path.chord_tol_mm, req.machine.tick_hz)
+        frames = (_frame_columns(arrays, which, where, only, trig, chord), np.array([n_c, n_e]))
+    window = {
+        "t_in": _pad_columns(spans.tangent_in[first:last], mb),
+        "t_out": _pad_columns(spans.tangent_out[first:last], mb),
+        "feed": _pad_aligned(req.feed_mm_s[first:last], mb, 0.0),
+        "dwell": _pad_aligned(req.dwell_s[first:last], mb, 0.0),
+        "at_kink": _pad_aligned(facts.at_kink[first:last], mb, False),
+        "is_point": _pad_aligned(facts.is_point[first:last], mb, True),  # padding: points at rest after the window
+        "cap_start": _pad_aligned(facts.cap_start[first:last], mb, 0.0),
+        "cap_end": _pad_aligned(facts.cap_end[first:last], mb, 0.0),
+        "curved": _pad_aligned(curved_span, mb, False),
+    }
+    iv = {
+        "local": _pad_aligned(local, mb, ns),  # padding intervals read the padding row ns of the window's spans
+        "s_start": _pad_aligned(s_start, mb, 0.0),
+        "delta": _pad_aligned(delta, mb, 0.0),
+    }
+    if frames is not None:
+        window["compact"] = _pad_aligned(compact, mb, 0)
+        iv["rank"] = _pad_aligned(rank, mb, 0)
     grid = _Intervals(span, s_start, delta)
-    if req.hold_caps is None or len(req.hold_caps) == 0:  # no holds: one array of inf for both ends
-        g["hold_a"] = g["hold_b"] = _pad_aligned(np.full(m, np.inf), mb, np.inf)
-    else:
+    holds = None
+    if req.hold_caps is not None and len(req.hold_caps):
         hold_a, hold_b = node_holds(req, grid)
-        g["hold_a"], g["hold_b"] = _pad_aligned(hold_a, mb, np.inf), _pad_aligned(hold_b, mb, np.inf)
-    if idx.size:
-        frames = [np.asarray(a) for a in pending]
-        inner = np.ones(n_c, bool)
-        inner[ends] = False
-        nxt = idx[inner] + 1  # the next interval starts where this one ends
-        t_m, k_m = zeros(), zeros()
-        for j, (a, b, mid) in enumerate(((g["t_a"], g["t_b"], t_m), (g["k_a"], g["k_b"], k_m))):
-            for i in range(3):
-                col = frames[3 * j + i]
-                a[i, idx] = col[:n_c]
-                b[i, idx[inner]] = a[i, nxt]
-                b[i, idx[ends]] = col[n_c : n_c + n_e]
-                mid[i, idx] = col[n_c + n_e : q]
-        del frames, pending
+        holds = (_pad_aligned(hold_a, mb, np.inf), _pad_aligned(hold_b, mb, np.inf))
     j_max = req.j_max
     limits = (
         np.asarray(req.v_max),
@@ -667,14 +681,113 @@ def _plain_window(
         req.machine.tick_hz,
     )
     j_max = np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None
-    if not idx.size:
+    g = _plain_inputs(window, iv, frames, holds, np.array([m, x_start]))
+    caps = _caps(g, limits[0], *limits[2:], j_max)
+    if frames is None:
         out = _plan_lines(g, *limits, x_start, axes=facts.axes, j_max=j_max)
-    else:
-        g = jax.device_put(g)
-        check = {f: g[f] for f in ("t_a", "k_a", "t_b", "k_b")} | {"t_m": t_m, "k_m": k_m, "a_max": limits[1]}
-        pieces, laws = _band_pieces(g, *limits, axes=facts.axes, j_max=j_max)
-        out = _band_solve(pieces, laws, x_start, check)
-    return grid, {k: np.asarray(v) for k, v in jax.device_get(out).items()}
+        return grid, {k: np.asarray(v) for k, v in jax.device_get(out).items()}
+    pieces, laws = _band_pieces(g, *limits, axes=facts.axes, j_max=j_max, caps=caps)
+    ncb = bucket_size(n_c)
+    at_b = np.arange(1, n_c + 1)  # a curved interval's end node: the next one's start, or its span's end
+    at_b[ends] = n_c + np.arange(n_e)
+    check = {"idx": _pad_aligned(idx, ncb, 0), "at_b": _pad_aligned(at_b, ncb, 0), "a_max": limits[1]}
+    out = jax.device_get(_plain_solve(pieces, laws, x_start, frames, check, facts.axes))
+    out = {k: np.asarray(v) for k, v in out.items()}
+    out["bad"] = np.zeros(m, bool)
+    out["bad"][idx] = out.pop("bad_curved")[:n_c]
+    return grid, out
+
+
+@partial(jax.jit, static_argnames=("axes",))
+def _plain_solve(pieces: dict, laws: dict, x_start, frames, check: dict, axes: tuple[int, ...]) -> dict:
+    """:func:`_band_solve` of a window without blends, the interior check on its curved intervals alone
+    (``bad_curved`` ``(ncb,)``, in their order): read from the nodes' frames as :func:`_plain_window` evaluates
+    them (``frames``), ``check["idx"]`` the curved intervals, ``check["at_b"]`` each one's end node."""
+    out = _band_solve(pieces, laws, x_start)
+    out["bad_curved"] = _curved_excess(out["x_node"], laws, frames, check, axes)
+    return out
+
+
+def _curved_excess(x_node, laws: dict, frames, check: dict, axes: tuple[int, ...]) -> jnp.ndarray:
+    """``(ncb,)`` :func:`interior_excess` of the curved intervals ``check["idx"]`` of a window without blends, in
+    their order, from ``x`` at the nodes ``(mb+1,)``, :func:`_law_inputs`' ``delta`` and ``share``, and the nodes'
+    frames as :func:`_plain_window` evaluates them."""
+    cols, (n_c, n_e) = frames
+    idx = check["idx"]
+    rank = jnp.arange(idx.shape[0])
+    at = (rank, rank, n_c + n_e + rank, n_c + n_e + rank, check["at_b"], check["at_b"])
+    frame = tuple(jnp.stack([cols[3 * (f % 2) + i][at[f]] for i in range(3)]) for f in range(6))
+    delta, share = laws["delta"][idx], laws["share"][idx]
+    on = (rank < n_c) & (delta > 0)
+    return _excess(frame, x_node[idx], x_node[idx + 1], delta, on, check["a_max"], share, axes)
+
+
+_caps = jax.jit(_interval_caps)
+
+
+def _pad_columns(rows: np.ndarray, n: int) -> np.ndarray:
+    """``(k, 3)`` rows as an :func:`_aligned` ``(3, n)`` array of columns, zero after the ``k`` rows."""
+    out = _aligned((3, n))
+    out[:, : rows.shape[0]] = rows.T
+    out[:, rows.shape[0] :] = 0.0
+    return out
+
+
+@jax.jit
+def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
+    """The grid fields of a window without blends as :func:`plan_grid` reads them (``g``), gathered from the
+    window's spans and the nodes' frames — the values the general grid has, bit for bit (moved, not computed),
+    with the chord speeds at the curved nodes (``chord_a``, ``chord_b``: see :func:`_frame_columns`).
+
+    ``window``: the window's span fields, ``(mb,)`` or ``(3, mb)`` (``t_in``, ``t_out``), padded after its spans
+    with a point at rest; ``iv``: each interval's ``local`` span, ``s_start``, ``delta`` ``(mb,)``; ``frames``:
+    ``None`` (no curved span) or :func:`_frame_columns`' seven columns with ``(n_c, n_e)``, laid out as
+    :func:`_plain_window` evaluates them, and then ``iv["rank"]`` (a curved interval's rank among them) and
+    ``window["compact"]`` (a curved span's rank); ``holds``: ``None`` or the node caps ``(hold_a, hold_b)``;
+    ``scalars``: ``(m, x_start)``.
+    """
+    local, s_start = iv["local"], iv["s_start"]
+    mb = local.shape[0]
+    m, x_start = scalars[0].astype(local.dtype), scalars[1]
+    real = jnp.arange(mb) < m
+    first_iv = s_start == 0
+    last_iv = jnp.concatenate([local[1:] != local[:-1], jnp.ones(1, bool)])
+    curved = window["curved"][local]
+    t_a, t_b = window["t_in"][:, local], window["t_out"][:, local]
+    zero = jnp.zeros((3, mb))
+    k_a = k_b = zero
+    if frames is not None:
+        cols, (n_c, n_e) = frames
+        rank = iv["rank"]
+        at = {"a": rank, "b": jnp.where(last_iv, n_c + window["compact"][local], rank + 1)}
+
+        def node(which: str, part: int, other):
+            return jnp.where(curved, jnp.stack([cols[3 * part + i][at[which]] for i in range(3)]), other)
+
+        t_a, t_b = node("a", 0, t_a), node("b", 0, t_b)
+        k_a, k_b = node("a", 1, zero), node("b", 1, zero)
+        # the chord speed at the curved nodes; inf elsewhere, which is what it is where the curvature is 0
+        chord = {f"chord_{e}": jnp.where(curved, cols[6][at[e]], jnp.inf) for e in "ab"}
+    cap_first = jnp.where(first_iv, window["cap_start"][local], jnp.inf)
+    g = {
+        "delta": iv["delta"],
+        "curved": curved,
+        "t_a": t_a,
+        "k_a": k_a,
+        "t_b": t_b,
+        "k_b": k_b,
+        "feed": window["feed"][local],
+        "dwell": jnp.where(first_iv, window["dwell"][local], 0.0),
+        "at_kink": window["at_kink"][local],
+        "is_point": window["is_point"][local],
+        "cap_first": cap_first.at[0].set(x_start),  # where the window before left the motion
+        "cap_last": jnp.where(real, jnp.where(last_iv, window["cap_end"][local], jnp.inf), 0.0),
+    }
+    inf = jnp.full(mb, jnp.inf)
+    g["hold_a"], g["hold_b"] = (inf, inf) if holds is None else holds
+    if frames is not None:
+        g.update(chord)
+    return g
 
 
 #: Plans of at least this many segments derive where their segments lie instead of storing it (the check costs
