@@ -687,7 +687,7 @@ def _plain_window(
         out = _plan_lines(g, *limits, x_start, axes=facts.axes, j_max=j_max)
         return grid, {k: np.asarray(v) for k, v in jax.device_get(out).items()}
     pieces, laws = _band_pieces(g, *limits, axes=facts.axes, j_max=j_max, caps=caps)
-    ncb = bucket_size(n_c)
+    ncb = bucket_size(q) // 2  # n_c <= q / 2: the check's shape follows the frames' (fewer compiled shapes)
     at_b = np.arange(1, n_c + 1)  # a curved interval's end node: the next one's start, or its span's end
     at_b[ends] = n_c + np.arange(n_e)
     check = {"idx": _pad_aligned(idx, ncb, 0), "at_b": _pad_aligned(at_b, ncb, 0), "a_max": limits[1]}
