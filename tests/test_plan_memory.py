@@ -185,3 +185,106 @@ def test_heap_thresholds_apply_on_glibc_only_and_leave_the_users_setting(monkeyp
     monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
     assert fix_thresholds() is glibc
     assert tune_heap() is glibc
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+def test_ramp_accelerations_are_derived_and_equal_the_stored_columns(monkeypatch, corner_tol):
+    """Large plans do not store ``a_acc``, ``a_dec`` while every window's equal :func:`_ramp_accel` of its speeds and
+    times (they do); storing them, as the table does from the first window that differs, plans the same."""
+    import jaxcnc.planners.topp as topp
+
+    prog = cam_polyline(3000)
+    m = parse_machine(BENCH_MACHINE + f"corner_tol_mm = {corner_tol}\n", "<bench>")
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 11)  # several windows
+    monkeypatch.setattr(topp, "TRIM_SEGMENTS", 1 << 30)
+    small = plan_job(prog, m).plan  # stored, as small plans do
+    monkeypatch.setattr(topp, "TRIM_SEGMENTS", 1)  # the large plans' way on a small one
+    modes = []
+    plan = topp._SegmentTable.plan
+
+    def recorded(self, hz):
+        modes.append((self.derived_accel, "a_acc" in self.cols))
+        return plan(self, hz)
+
+    monkeypatch.setattr(topp._SegmentTable, "plan", recorded)
+    derived = plan_job(prog, m).plan
+    assert modes == [(True, False)]
+    _same_plan(derived, small)
+    derivable = topp._SegmentTable._accel_derivable
+    calls = []
+
+    def second_window_differs(out, commit):
+        calls.append(commit)
+        return len(calls) != 2 and derivable(out, commit)
+
+    monkeypatch.setattr(topp._SegmentTable, "_accel_derivable", staticmethod(second_window_differs))
+    stored = plan_job(prog, m).plan
+    assert modes[1] == (False, True) and len(calls) == 2  # stored from the second window on
+    _same_plan(stored, small)
+
+
+def test_ramp_accel_is_the_trapezoids_division_bit_for_bit():
+    from jaxcnc.planners.motion import trapezoids
+    from jaxcnc.planners.topp import _ramp_accel
+
+    rng = np.random.default_rng(5)
+    n = 5000
+    x = rng.uniform(0, 1e4, n + 1) * (rng.random(n + 1) < 0.9)  # some rests
+    cap = rng.uniform(0, 2e4, n)
+    a = rng.uniform(0, 3e3, n) * (rng.random(n) < 0.95)  # some without acceleration
+    length = rng.uniform(0, 0.2, n) * (rng.random(n) < 0.98)
+    t = {k: np.asarray(v) for k, v in trapezoids(x, cap, a, length, np.zeros(n)).items()}
+    for k, v, dt in (("a_acc", "v0", "t_acc"), ("a_dec", "v1", "t_dec")):
+        assert np.array_equal(_ramp_accel(t["vp"], t[v], t[dt]).view(np.int64), t[k].view(np.int64)), k
+
+
+def _split_program():
+    """Large turns, long lines and arcs at a coarse tolerance: blends split into pieces (several rounds)."""
+    from jaxcnc.gcode.interpreter import parse_gcode
+
+    rng = np.random.default_rng(0)
+    lines, x, y = ["G21 G90", "G1 F3000 X0 Y0"], 0.0, 0.0
+    for i in range(200):
+        x += rng.uniform(1, 10)
+        y += rng.uniform(-10, 10) * (1 if i % 2 else -1)
+        lines.append(f"G1 X{x:.4f} Y{y:.4f}")
+        if i % 7 == 0:
+            lines.append(f"G2 X{x + 5:.4f} Y{y:.4f} I2.5 J0")
+            x += 5
+    return parse_gcode("\n".join(lines))
+
+
+def test_blend_trims_and_pieces_made_block_by_block_are_the_same_spans(monkeypatch):
+    """:func:`~jaxcnc.geometry.blend._trim` evaluates and :func:`~jaxcnc.geometry.blend._blend_fields` places its
+    pieces in blocks (bounded temporaries); blocks of a few rows give the same spans, bit for bit."""
+    import jaxcnc.geometry.blend as blend
+
+    prog = _split_program()
+    pieces = []
+    kernel = blend._kernel
+    monkeypatch.setattr(blend, "_kernel", lambda pts, corner: pieces.append(len(pts)) or kernel(pts, corner))
+    whole = build_spans(prog, 0.5)
+    assert len(pieces) > 3  # blends were split, in several rounds
+    monkeypatch.setattr(blend, "TRIM_BLOCK", 5)
+    monkeypatch.setattr(blend, "PLACE_BLOCK", 3)
+    blocks = build_spans(prog, 0.5)
+    for f in SPAN_FIELDS:
+        assert np.array_equal(getattr(blocks, f), getattr(whole, f)), f
+    for f in ("coeffs", "timing", "length_err"):
+        assert np.array_equal(getattr(blocks.polys, f), getattr(whole.polys, f)), f
+    for f in ("center", "e1", "e2", "sweep"):
+        assert np.array_equal(getattr(blocks.arcs, f), getattr(whole.arcs, f)), f
+
+
+def test_a_large_program_hands_free_heap_back_before_its_spans_are_built(monkeypatch):
+    import jaxcnc.planners.job as job
+
+    calls = []
+    monkeypatch.setattr(job, "release_free_heap", lambda: calls.append(1))
+    prog = cam_polyline(300)
+    m = parse_machine(BENCH_MACHINE, "<bench>")
+    first = plan_job(prog, m).plan
+    assert not calls  # a small program does not
+    monkeypatch.setattr(job, "TRIM_BLOCKS", 100)
+    _same_plan(plan_job(prog, m).plan, first)
+    assert calls == [1]

@@ -322,13 +322,16 @@ def _blend_fields(
         found = _kernel(pts, pts[:, 0])
     if len(parts) == 1 and parts[0][2].all():  # no blend split: the kernel's arrays, in order already
         out = dict(parts[0][0], origin=parts[0][1][:, 0].copy(), owner=parts[0][3])  # (a view would hold pts)
-    else:  # the pieces of every round, ordered by key; one field at a time (bounded extra memory)
+    else:  # the pieces of every round, ordered by key; one field at a time, placed block by block into its rows
         order = np.argsort(np.concatenate([p[4][p[2]] for p in parts]), kind="stable")
-        out = {}
-        for f in parts[0][0]:
-            out[f] = np.concatenate([p[0][f][p[2]] for p in parts])[order]
-        out["origin"] = np.concatenate([p[1][p[2], 0] for p in parts])[order]
-        out["owner"] = np.concatenate([p[3][p[2]] for p in parts])[order]
+        row = np.empty_like(order)
+        row[order] = np.arange(order.size)  # the row of the i-th piece kept (rounds in order)
+        kept = [np.flatnonzero(p[2]) for p in parts]
+        del order
+        out = {f: _placed(parts, kept, row, lambda p, f=f: p[0][f]) for f in parts[0][0]}
+        out["origin"] = _placed(parts, kept, row, lambda p: p[1][:, 0])
+        out["owner"] = _placed(parts, kept, row, lambda p: p[3])
+        del row, kept
     del parts
     owner = out["owner"]
     # a blend's ends have exactly its neighbours' tangents
@@ -354,6 +357,27 @@ def _blend_fields(
     return fields_, PolyTable(coeffs=out["coeffs"], timing=out["timing"], length_err=np.zeros(n)), owner
 
 
+def _placed(parts: list, kept: list[np.ndarray], row: np.ndarray, field) -> np.ndarray:
+    """``field(part)`` (an array over a round's pieces) of every kept piece (``kept``: each round's, in order) in
+    its row ``row`` (over the kept pieces of all rounds, in order), copied :data:`PLACE_BLOCK` pieces at a time."""
+    first = field(parts[0])
+    dst = np.empty((row.size,) + first.shape[1:], first.dtype)
+    at = 0
+    for p, k in zip(parts, kept, strict=True):
+        src = field(p)
+        for a in range(0, k.size, PLACE_BLOCK):
+            kb = k[a : a + PLACE_BLOCK]
+            dst[row[at + a : at + a + kb.size]] = src[kb]
+        at += k.size
+    return dst
+
+
+#: Spans per block of :func:`_trim`'s evaluations (elementwise: the same values as one call over all of them).
+TRIM_BLOCK = 1 << 16
+#: Pieces per block that :func:`_blend_fields` places into their rows (the copies' temporaries stay small).
+PLACE_BLOCK = 1 << 16
+
+
 def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[dict[str, np.ndarray], ArcTable]:
     """Span fields with lines and arcs cut back at their ends (``trim_start``/``trim_end`` mm), and the arcs."""
     arrays = span_arrays(spans)
@@ -364,11 +388,13 @@ def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[d
     if not cut.any():
         return out, spans.arcs
     c = np.flatnonzero(cut)
-    q0, t0 = evaluate_path(arrays, idx[c], trim_start[c], 1)
-    _, t1 = evaluate_path(arrays, idx[c], spans.length[c] - trim_end[c], 1)
-    out["origin"][c] = q0
-    out["tangent_in"][c] = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
-    out["tangent_out"][c] = t1 / np.linalg.norm(t1, axis=1, keepdims=True)
+    for a in range(0, c.size, TRIM_BLOCK):  # the evaluations' temporaries: a block's, not every span's
+        cb = c[a : a + TRIM_BLOCK]
+        q0, t0 = evaluate_path(arrays, idx[cb], trim_start[cb], 1)
+        _, t1 = evaluate_path(arrays, idx[cb], spans.length[cb] - trim_end[cb], 1)
+        out["origin"][cb] = q0
+        out["tangent_in"][cb] = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
+        out["tangent_out"][cb] = t1 / np.linalg.norm(t1, axis=1, keepdims=True)
     out["length"][c] = spans.length[c] - trim_start[c] - trim_end[c]
     line = c[spans.kind[c] == SpanKind.LINE]
     if line.size:

@@ -16,6 +16,7 @@ from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import AxisConfig, MachineConfig
+from jaxcnc.planners.grid import release_free_heap
 from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, coordinate_extent_mm, request_limits
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
 from jaxcnc.planners.smoothing import jerk_limited
@@ -90,6 +91,12 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
         )
 
 
+#: Programs of at least this many rows hand the C heap's free pages back before their spans are built
+#: (:func:`~jaxcnc.planners.grid.release_free_heap`): a 1 M-block blended plan made after another one peaked
+#: ~120 MB higher, in the blends' build, on the pieces the first plan left (docs/planning.md, "Memory").
+TRIM_BLOCKS = 1 << 18
+
+
 def machine_planner(machine: MachineConfig) -> str:
     """The contour planner ``machine`` names (``[machine] planner``), or :data:`DEFAULT_PLANNER`."""
     return machine.planner or DEFAULT_PLANNER
@@ -108,6 +115,8 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
             raise key_error(machine, "machine", "planner", str(exc)) from None
         raise
     axis_source = _check_axes(program, machine)
+    if len(program) >= TRIM_BLOCKS:
+        release_free_heap()  # what earlier work freed (a job planned before): the spans' build starts lean
     spans = build_spans(program, machine.path.corner_tol_mm)
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")

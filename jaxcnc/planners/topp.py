@@ -819,21 +819,29 @@ class _SegmentTable:
       final ``counts`` (the windows cut span ``k`` into ``counts[k]`` equal intervals, :func:`_grid_rows`), so
       given ``span_length`` and ``counts`` (the array refinement updates in place) those three columns are
       made by :meth:`plan` — 48 MB less at the peak of a 2 M-segment plan — and stored only from the first
-      window whose grid differs in a bit (never seen).
+      window whose grid differs in a bit (never seen);
+    * in the same large plans, the ramps' accelerations ``a_acc``, ``a_dec`` are what :func:`trapezoids` makes
+      of the speeds and times kept anyway (:func:`_ramp_accel`), so :meth:`plan` makes them after the tick
+      alignment — 84 MB less at the windows' end and at the alignment of a 5 M-segment plan — and they are
+      stored only from the first window where that differs in a bit (never seen).
     """
 
     _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {"rest": True, "length": 0.0, "span": 0, "s_start": 0.0}
     _DTYPES = {"rest": np.bool_, "span": np.int64}
     _WHERE = ("length", "span", "s_start")
+    _ACCEL = ("a_acc", "a_dec")
 
     def __init__(self, capacity: int, span_length: np.ndarray | None = None, counts: np.ndarray | None = None) -> None:
         self.n = 0
         rows = bucket_size(capacity)
         self.span_length, self.counts = span_length, counts
         self.derived = counts is not None  # where the segments lie: derived from counts (True) or stored
+        self.derived_accel = self.derived  # the ramps' accelerations: derived from speeds and times, or stored
         self.next_span = 0  # the first span no committed segment covers yet
-        keep = [k for k in self._FILL if k != "v1" and not (self.derived and k in self._WHERE)]
-        self.cols = {k: np.empty(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
+        derived = (self._WHERE if self.derived else ()) + (self._ACCEL if self.derived_accel else ())
+        keep = [k for k in self._FILL if k != "v1" and k not in derived]
+        # aligned: the tick alignment reads the duration columns in place (else XLA copies them, 3 x 8 bytes a row)
+        self.cols = {k: _aligned(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
         self.v1: np.ndarray | None = None  # None: v1[k] is v0[k + 1]
 
     def __len__(self) -> int:
@@ -856,7 +864,7 @@ class _SegmentTable:
             grown = bucket_size(max(rows, have + have // 4))
             for k, a in self.cols.items():
                 extra = int(k == "v0")
-                self.cols[k] = np.empty(grown + extra, a.dtype)
+                self.cols[k] = _aligned(grown + extra, a.dtype)
                 self.cols[k][: self.n + extra] = a[: self.n + extra]
             if self.v1 is not None:
                 v1, self.v1 = self.v1, np.empty(grown)
@@ -886,6 +894,31 @@ class _SegmentTable:
             self.cols[k][: self.n] = a
         self.derived = False
 
+    def _v1(self, n: int) -> np.ndarray:
+        """``v1`` of the first ``n`` segments (a view)."""
+        return self.cols["v0"][1 : n + 1] if self.v1 is None else self.v1[:n]
+
+    def _accel(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """``a_acc, a_dec`` of the first ``n`` segments from their speeds and times (:func:`_ramp_accel`)."""
+        cols, v1 = self.cols, self._v1(n)
+        return tuple(_ramp_accel(cols["vp"][:n], v[:n], cols[t][:n]) for v, t in ((cols["v0"], "t_acc"), (v1, "t_dec")))
+
+    @staticmethod
+    def _accel_derivable(out: dict[str, np.ndarray], commit: int) -> bool:
+        """The window's first ``commit`` ramp accelerations are :func:`_ramp_accel` of its speeds and times."""
+        return all(
+            _same_bits(_ramp_accel(out["vp"][:commit], out[v][:commit], out[t][:commit]), out[k][:commit])
+            for k, v, t in (("a_acc", "v0", "t_acc"), ("a_dec", "v1", "t_dec"))
+        )
+
+    def _store_accel(self) -> None:
+        """From now on store the ramps' accelerations; the rows so far are derived."""
+        rows = self.cols["t_acc"].shape[0]
+        for k, a in zip(self._ACCEL, self._accel(self.n), strict=True):
+            self.cols[k] = _aligned(rows)
+            self.cols[k][: self.n] = a
+        self.derived_accel = False
+
     def _where(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``length, span, s_start`` of the first ``n`` segments (derived mode), made span block by span block
         into arrays of ``n`` rows (the temporaries stay small)."""
@@ -905,6 +938,8 @@ class _SegmentTable:
         """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
         if self.derived and not self._derivable(grid, commit):
             self._store_where()  # (never seen: the windows cut the spans as the counts say)
+        if self.derived_accel and not self._accel_derivable(out, commit):
+            self._store_accel()  # (never seen: the trapezoids divide the same speeds and times)
         self._reserve(self.n + commit)
         n, cols = self.n, self.cols
         rows = slice(n, n + commit)
@@ -915,7 +950,7 @@ class _SegmentTable:
             self.v1 = np.empty(cols["t_acc"].shape[0])  # (never seen: the nodes are shared)
             self.v1[:n] = cols["v0"][1 : n + 1]
         for k in _SEGMENT_KEYS:
-            if k != "v1":
+            if k in cols:
                 cols[k][rows] = out[k][:commit]
         if self.v1 is None:
             cols["v0"][n + commit] = v1[-1]
@@ -943,14 +978,30 @@ class _SegmentTable:
         times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
         out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
         del times
-        out.update({k: cols[k][:n] for k in _SEGMENT_KEYS if k != "v1"})
-        out["v1"] = cols["v0"][1 : n + 1] if self.v1 is None else self.v1[:n]
+        out.update({k: cols[k][:n] for k in _SEGMENT_KEYS if k in cols})
+        out["v1"] = self._v1(n)
+        if self.derived_accel:  # made in the memory the alignment's working arrays left
+            out["a_acc"], out["a_dec"] = self._accel(n)
         length, span, s_start = self._where(n) if self.derived else (cols[k][:n] for k in self._WHERE)
         return plan_from_outputs(out, length, span, s_start, tick_hz)
 
 
 #: Spans per block when :meth:`_SegmentTable.plan` makes where the segments lie.
 _WHERE_BLOCK = 1 << 16
+#: Segments per block of :func:`_ramp_accel` (its temporaries stay small).
+_ACCEL_BLOCK = 1 << 18
+
+
+def _ramp_accel(vp: np.ndarray, v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(n,)`` a ramp's acceleration ``(vp - v) / t`` (0 where ``t`` is not positive), as :func:`trapezoids`
+    computes ``a_acc`` (``v = v0``, ``t = t_acc``) and ``a_dec`` (``v1``, ``t_dec``): the same operations, bit for
+    bit (:class:`_SegmentTable` checks every window). In blocks of :data:`_ACCEL_BLOCK` rows."""
+    out = np.empty(vp.shape[0])
+    for a in range(0, vp.shape[0], _ACCEL_BLOCK):
+        b = slice(a, a + _ACCEL_BLOCK)
+        ok = t[b] > 0
+        out[b] = np.where(ok, (vp[b] - v[b]) / np.where(ok, t[b], 1.0), 0.0)
+    return out
 
 
 def _grid_rows(span_length: np.ndarray, counts: np.ndarray, first: int, last: int) -> tuple[np.ndarray, ...]:
