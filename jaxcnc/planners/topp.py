@@ -21,7 +21,7 @@ What each interval is allowed (per axis ``i``, ``x = v²``):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
+from functools import cache, partial
 
 import jax
 import jax.numpy as jnp
@@ -30,6 +30,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError
+from jaxcnc.geometry.blend_kernel import cpu_loop_options
 from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
@@ -409,10 +410,20 @@ def interval_share(at_kink, curved):
     return xp.where(at_kink, 1.0 - JUNCTION_SHARE, 1.0) * xp.where(curved, 1.0 - GRID_MARGIN, 1.0)
 
 
-@jax.jit
 def _junction_facts(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz):
-    """:func:`~jaxcnc.planners.limits.junctions` of the whole program (padded span arrays)."""
-    return junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
+    """:func:`~jaxcnc.planners.limits.junctions` of the whole program (padded span arrays), compiled without
+    XLA:CPU's YNNPACK fusions (:func:`~jaxcnc.geometry.blend_kernel.cpu_loop_options`): its norms, maxima and
+    minima over rows of three went to them, and took twice the time (1 M blocks: 24 -> 11 ms CPU; the same bits
+    on the CAM contour — minima and maxima in any order are the same, and the norms' sums of three squares
+    decide a corner only at a turn within a rounding of 1°)."""
+    return _junction_program()(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
+
+
+@cache
+def _junction_program():
+    """:func:`~jaxcnc.planners.limits.junctions` jitted with :func:`~jaxcnc.geometry.blend_kernel.cpu_loop_options`
+    (made on first use: the options are probed by a compile)."""
+    return jax.jit(junctions, compiler_options=cpu_loop_options())
 
 
 @jax.jit
