@@ -99,13 +99,14 @@ AXIS_FIELDS = ("t_a", "k_a", "t_b", "k_b", "t_lo", "t_hi", "k_lo", "k_hi")
 ALIGN_BYTES = 64
 
 
-def aligned_zeros(shape: tuple[int, ...]) -> np.ndarray:
-    """A float64 array of zeros whose data start on an ``ALIGN_BYTES`` boundary (read in place by a compiled
-    program; an unaligned array is copied on every call)."""
-    size = int(np.prod(shape)) * 8
-    raw = np.zeros(size + ALIGN_BYTES, np.uint8)
+def aligned_array(shape: int | tuple[int, ...], dtype=np.float64, zeros: bool = False) -> np.ndarray:
+    """An array whose data start on an ``ALIGN_BYTES`` boundary: a compiled program reads it in place (an
+    unaligned array is copied on every call). ``zeros``: filled with zeros, else uninitialised."""
+    dtype = np.dtype(dtype)
+    size = int(np.prod(shape)) * dtype.itemsize
+    raw = (np.zeros if zeros else np.empty)(size + ALIGN_BYTES, np.uint8)
     skip = -raw.ctypes.data % ALIGN_BYTES
-    return raw[skip : skip + size].view(np.float64).reshape(shape)
+    return raw[skip : skip + size].view(dtype).reshape(shape)
 
 
 def is_curved(kind: np.ndarray) -> np.ndarray:
@@ -264,7 +265,7 @@ def build_grid(
     kind = spans.kind[span]
     curved = is_curved(kind)
     boxed = kind == SpanKind.BLEND
-    major = {f: aligned_zeros((3, m if pad_to is None else pad_to)) for f in AXIS_FIELDS}
+    major = {f: aligned_array((3, m if pad_to is None else pad_to), zeros=True) for f in AXIS_FIELDS}
     for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
         cols = np.ascontiguousarray(field[first:last].T)  # (3, the window's spans)
         for i in range(3):

@@ -55,7 +55,8 @@ CHECK_REL_SLACK = 1e-9
 GROUP_END_TOL_TICKS = CHECK_REL_SLACK / 2
 #: Bound on the error of a position the tick stage computes in float64 (a line's ``origin + s t``, an arc's
 #: ``centre + r (cos ψ e1 + sin ψ e2)``, a polynomial piece's origin plus its local value), in units in the
-#: last place of the largest magnitude involved (:func:`coordinate_extent_mm`). Measured: 1–2.
+#: last place of the largest magnitude involved (:func:`coordinate_extent_mm`). Measured 0.25–2.0 against a long-double
+#: evaluation of the same plans (docs/planning.md; ``tests/test_margin.py`` holds the bound).
 POSITION_ULPS = 8
 
 

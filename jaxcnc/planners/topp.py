@@ -37,6 +37,7 @@ from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
     Grid,
+    aligned_array,
     build_grid,
     cut_spans,
     device_spans,
@@ -309,25 +310,12 @@ def _arc_trig(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndar
 
 
 def _pad_aligned(a: np.ndarray, n: int, fill) -> np.ndarray:
-    """:func:`~jaxcnc.buckets.pad_rows` into an :func:`_aligned` array (read in place by a compiled program)."""
-    out = _aligned((n,) + a.shape[1:], a.dtype)
+    """:func:`~jaxcnc.buckets.pad_rows` into an :func:`~jaxcnc.planners.grid.aligned_array` (read in place by a
+    compiled program)."""
+    out = aligned_array((n,) + a.shape[1:], a.dtype)
     out[: a.shape[0]] = a
     out[a.shape[0] :] = fill
     return out
-
-
-#: Alignment (bytes) at which the CPU backend takes a NumPy array without copying it (``jax.device_put``).
-_ALIGN = 64
-
-
-def _aligned(shape: int | tuple[int, ...], dtype=np.float64) -> np.ndarray:
-    """An uninitialised array whose data start on a :data:`_ALIGN`-byte boundary: the compiled programs read it
-    in place (an unaligned array is copied on every call; a window's inputs are ~25 MB)."""
-    dtype = np.dtype(dtype)
-    size = int(np.prod(shape)) * dtype.itemsize
-    raw = np.empty(size + _ALIGN, np.uint8)
-    skip = -raw.ctypes.data % _ALIGN
-    return raw[skip : skip + size].view(dtype).reshape(shape)
 
 
 def _interval_caps(g: dict, v_max, chord_tol, tick_hz, j_max) -> dict:
@@ -649,7 +637,7 @@ def _plain_window(
         n_c, n_e = idx.size, ends.size
         # nodes: every curved interval's start and each curved span's end; then the midpoints
         q = 2 * n_c + n_e
-        which, where = _aligned(bucket_size(q), np.int64), _aligned(bucket_size(q))
+        which, where = aligned_array(bucket_size(q), np.int64), aligned_array(bucket_size(q))
         which[q:], where[q:] = 0, 0.0
         row = compact[local[idx]]
         which[:n_c], where[:n_c] = row, s_start[idx]
@@ -738,7 +726,7 @@ _caps = jax.jit(_interval_caps)
 
 def _pad_columns(rows: np.ndarray, n: int) -> np.ndarray:
     """``(k, 3)`` rows as an :func:`_aligned` ``(3, n)`` array of columns, zero after the ``k`` rows."""
-    out = _aligned((3, n))
+    out = aligned_array((3, n))
     out[:, : rows.shape[0]] = rows.T
     out[:, rows.shape[0] :] = 0.0
     return out
@@ -852,7 +840,7 @@ class _SegmentTable:
         derived = (self._WHERE if self.derived else ()) + (self._ACCEL if self.derived_accel else ())
         keep = [k for k in self._FILL if k != "v1" and k not in derived]
         # aligned: the tick alignment reads the duration columns in place (else XLA copies them, 3 x 8 bytes a row)
-        self.cols = {k: _aligned(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
+        self.cols = {k: aligned_array(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
         self.v1: np.ndarray | None = None  # None: v1[k] is v0[k + 1]
 
     def __len__(self) -> int:
@@ -875,7 +863,7 @@ class _SegmentTable:
             grown = bucket_size(max(rows, have + have // 4))
             for k, a in self.cols.items():
                 extra = int(k == "v0")
-                self.cols[k] = _aligned(grown + extra, a.dtype)
+                self.cols[k] = aligned_array(grown + extra, a.dtype)
                 self.cols[k][: self.n + extra] = a[: self.n + extra]
             if self.v1 is not None:
                 v1, self.v1 = self.v1, np.empty(grown)
@@ -926,7 +914,7 @@ class _SegmentTable:
         """From now on store the ramps' accelerations; the rows so far are derived."""
         rows = self.cols["t_acc"].shape[0]
         for k, a in zip(self._ACCEL, self._accel(self.n), strict=True):
-            self.cols[k] = _aligned(rows)
+            self.cols[k] = aligned_array(rows)
             self.cols[k][: self.n] = a
         self.derived_accel = False
 
@@ -1093,7 +1081,7 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
         if major is not None and major.shape[1] == mb:  # built in this layout (zero padding): read in place
             g[f] = major
         else:
-            g[f] = _aligned((3, mb))
+            g[f] = aligned_array((3, mb))
             g[f][:, :m] = getattr(grid, f).T
             g[f][:, m:] = 0.0
     g.update(
