@@ -35,6 +35,8 @@ tangentially by the programs that write them).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from jaxcnc.buckets import bucket_size, pad_rows
@@ -43,7 +45,17 @@ from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
+from jaxcnc.geometry.spans import (
+    MIN_LENGTH_MM,
+    SPAN_FIELDS,
+    ArcTable,
+    PolyTable,
+    Spans,
+    assemble,
+    join_spans,
+    merge_polys,
+    slice_spans,
+)
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -231,13 +243,49 @@ def _chain_curvature(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.n
 
 
 def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
-    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring)."""
+    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring).
+
+    A long path is blended in chunks of about :data:`BLEND_CHUNK` spans, :data:`BLEND_THREADS` at a time (NumPy
+    and the compiled kernels release the GIL: both cores work), each chunk read with :data:`HALO` spans of its
+    neighbours on either side. What a junction's blend becomes depends on the spans within a few junctions of it
+    (its cut-backs, the consumed lines beside it, the chain rounds' frozen spans: at most two spans further per
+    round), so each chunk's own spans and blends come out as the whole path's would, and the working memory is
+    a few chunks' instead of the whole path's (linear in the path's length, not worse).
+    """
+    n = len(spans)
+    chunks = -(-n // BLEND_CHUNK)
+    if chunks < 2:
+        return _blend_part(program, spans, corner_tol_mm, 0, n)
+    bounds = (np.arange(chunks + 1) * n) // chunks
+
+    def part(c: int) -> Spans:
+        lo, hi = int(bounds[c]), int(bounds[c + 1])
+        a, b = max(0, lo - HALO), min(n, hi + HALO)
+        return _blend_part(program, slice_spans(spans, a, b), corner_tol_mm, lo - a, hi - a)
+
+    with ThreadPoolExecutor(BLEND_THREADS, thread_name_prefix="jaxcnc-blend") as pool:
+        parts = list(pool.map(part, range(chunks)))
+    return join_spans(parts)
+
+
+#: Spans per chunk of :func:`blend_path` (a shorter path is blended in one piece).
+BLEND_CHUNK = 1 << 15
+#: Neighbouring spans each chunk reads on either side (its blends depend on at most ~15 of them).
+HALO = 64
+#: Chunks blended at the same time.
+BLEND_THREADS = 2
+
+
+def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, hi: int) -> Spans:
+    """Spans ``lo..hi-1`` of ``spans`` blended (:func:`blend_path`), with the blends of the junctions after them:
+    the spans outside that range are read (their junctions with it) but not returned."""
+    whole = lo == 0 and hi == len(spans)
     tol = junction_tolerances(program, spans, corner_tol_mm)
     t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
     turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
     j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
     if j.size == 0:
-        return spans
+        return spans if whole else slice_spans(spans, lo, hi)
     half = 0.5 * spans.length
     ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
@@ -256,7 +304,7 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     keep &= ell > MIN_LENGTH_MM
     j, ell, lines = j[keep], ell[keep], lines[keep]
     if j.size == 0:
-        return spans
+        return spans if whole else slice_spans(spans, lo, hi)
     # chords of a curve: consume them whole, and let the blends meet with a common curvature, where
     # that keeps them within tol (else back to symmetric cuts and the line's own curvature, 0)
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
@@ -290,11 +338,14 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     trimmed, arcs = _trim(spans, trim_start, trim_end)
     del trim_start, trim_end
     alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
+    mine = None  # the blend pieces returned: all of them, or those of the junctions after spans lo..hi-1
+    if not whole:
+        alive[:lo], alive[hi:] = False, False
+        mine = (j[owner] >= lo) & (j[owner] < hi)
     # a blend's pieces before its second span, in order
-    key = np.concatenate(
-        [np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))]
-    )
-    return assemble([(trimmed, alive), (fields_, None)], key, arcs, merge_polys([spans.polys, table]))
+    piece_key = j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))
+    key = np.concatenate([np.flatnonzero(alive).astype(np.float64), piece_key if mine is None else piece_key[mine]])
+    return assemble([(trimmed, alive), (fields_, mine)], key, arcs, merge_polys([spans.polys, table]))
 
 
 def _blend_fields(
@@ -388,15 +439,16 @@ def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[d
     if not cut.any():
         return out, spans.arcs
     c = np.flatnonzero(cut)
-    for a in range(0, c.size, TRIM_BLOCK):  # the evaluations' temporaries: a block's, not every span's
-        cb = c[a : a + TRIM_BLOCK]
+    left = c[spans.length[c] - trim_start[c] - trim_end[c] > MIN_LENGTH_MM]  # not consumed: their new ends
+    for a in range(0, left.size, TRIM_BLOCK):  # the evaluations' temporaries: a block's, not every span's
+        cb = left[a : a + TRIM_BLOCK]
         q0, t0 = evaluate_path(arrays, idx[cb], trim_start[cb], 1)
         _, t1 = evaluate_path(arrays, idx[cb], spans.length[cb] - trim_end[cb], 1)
         out["origin"][cb] = q0
         out["tangent_in"][cb] = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
         out["tangent_out"][cb] = t1 / np.linalg.norm(t1, axis=1, keepdims=True)
     out["length"][c] = spans.length[c] - trim_start[c] - trim_end[c]
-    line = c[spans.kind[c] == SpanKind.LINE]
+    line = left[spans.kind[left] == SpanKind.LINE]
     if line.size:
         end = out["origin"][line] + out["length"][line, None] * out["tangent_in"][line]
         out["lo"][line] = np.minimum(out["origin"][line], end)

@@ -196,6 +196,8 @@ def evaluate_path(
     polys = _poly(a, span, s, order, xp, only == "blend") if has_polys else None
     if trig is not None and only != "arc":
         raise ValueError("trig is for arcs alone (only='arc')")
+    if xp is np and only is None:
+        return _evaluate_families(a, span, s, order)
     arcs = _arc(a, span, s, order, xp, trig) if a["arc_radius"].shape[-1] and only in (None, "arc") else None
     zero = xp.zeros_like(s)
     cols = [[] for _ in range(order + 1)]
@@ -216,6 +218,36 @@ def evaluate_path(
         for r in range(order + 1):
             cols[r].append(val[r])
     return tuple(xp.stack(c, axis=-1) for c in cols)
+
+
+def _evaluate_families(a: dict, span: np.ndarray, s: np.ndarray, order: int) -> tuple:
+    """:func:`evaluate_path` on NumPy arrays, each family's formulas on its own rows alone: a path of lines with a
+    few arcs does not pay every arc's sines and cosines on every line. Each row gets the value of the same
+    operations as in :func:`evaluate_path`'s selection (``s`` clipped; lines ``o + s t``; other rows ``o + 0 t``)."""
+    shape = np.broadcast_shapes(np.shape(span), np.shape(s))
+    span = np.broadcast_to(span, shape).reshape(-1)
+    s = np.clip(np.broadcast_to(s, shape).reshape(-1), 0.0, a["length"][span])
+    kind = a["kind"][span]
+    out = [np.empty((span.size, 3)) for _ in range(order + 1)]
+    arc = kind == SpanKind.ARC
+    poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
+    rest = ~(arc | poly)  # lines, and points (``o``, derivatives 0)
+    rows = np.flatnonzero(rest) if not rest.all() else slice(None)
+    sp, line = span[rows], kind[rows] == SpanKind.LINE
+    step = np.where(line, s[rows], 0.0)
+    for i in range(3):
+        o, t = a["origin"][i][sp], a["tangent"][i][sp]
+        out[0][rows, i] = o + step * t
+        if order >= 1:
+            out[1][rows, i] = np.where(line, t, 0.0)
+        for r in range(2, order + 1):
+            out[r][rows, i] = 0.0
+    for family, mask in (("arc", arc), ("curve", poly)):
+        rows = np.flatnonzero(mask)
+        if rows.size:
+            for r, v in enumerate(evaluate_path(a, span[rows], s[rows], order, only=family)):
+                out[r][rows] = v
+    return tuple(v.reshape(shape + (3,)) for v in out)
 
 
 def evaluate_bezier(coeffs_t, origin_t, seg, u, order: int = 0, xp: ModuleType = np) -> tuple:

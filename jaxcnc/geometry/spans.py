@@ -419,6 +419,27 @@ def concat_spans(
     return assemble([(f, None) for f, _ in parts], order_key, arc_table, merge_polys(polys))
 
 
+def join_spans(parts: list[Spans]) -> Spans:
+    """The spans of ``parts`` one after the other, as one :class:`Spans`: each part's arc and poly rows that its spans
+    use (in their order), ``item`` renumbered into the joined tables. The list is consumed (emptied): each field's
+    columns are dropped as soon as they are joined, so beside the result at most one field is copied at a time."""
+    fields_, arcs, polys = [], [], []
+    for sp in parts:
+        f = {key: getattr(sp, key) for key in SPAN_FIELDS}
+        sub_arcs, sub_polys = _used_rows(f, sp.arcs, sp.polys, sum(map(len, arcs)), sum(map(len, polys)))
+        arcs.append(sub_arcs)
+        polys.append(sub_polys)
+        fields_.append(f)
+    parts.clear()  # the parts' arrays now live in fields_ alone
+    out = {}
+    for key in SPAN_FIELDS:
+        a = np.concatenate([f.pop(key) for f in fields_])
+        a.setflags(write=False)
+        out[key] = a
+    arc_table = ArcTable(**{a.name: np.concatenate([getattr(t, a.name) for t in arcs]) for a in fields(ArcTable)})
+    return Spans(**out, arcs=arc_table, polys=merge_polys(polys))
+
+
 def program_spans(program: Program) -> Spans:
     """Turn a Program's rows into spans in path order (vectorised over rows), junctions as programmed.
 
@@ -469,20 +490,28 @@ def take_spans(spans: Spans, rows: np.ndarray) -> Spans:
 
 def _own_tables(spans: Spans, out: dict[str, np.ndarray]) -> Spans:
     """``out`` (some rows of ``spans``' fields) with the arc and poly rows they use, ``item`` renumbered."""
+    sub_arcs, sub_polys = _used_rows(out, spans.arcs, spans.polys)
+    out["item"].setflags(write=False)
+    return Spans(**out, arcs=sub_arcs, polys=sub_polys)
+
+
+def _used_rows(
+    out: dict[str, np.ndarray], arcs: ArcTable, polys: PolyTable, arc_base: int = 0, poly_base: int = 0
+) -> tuple[ArcTable, PolyTable]:
+    """The rows of ``arcs`` and ``polys`` that the span fields ``out`` use, in the spans' order; ``out["item"]``
+    replaced by a copy numbering them from ``arc_base`` / ``poly_base``."""
     kind, item = out["kind"], out["item"].copy()
-    arcs, polys = spans.arcs, spans.polys
     is_arc = (kind == SpanKind.ARC) & (item >= 0)
     is_poly = np.isin(kind, POLY_KINDS) & (item >= 0)
     arc_rows, poly_rows = item[is_arc], item[is_poly]
-    item[is_arc] = np.arange(arc_rows.size)
-    item[is_poly] = np.arange(poly_rows.size)
-    item.setflags(write=False)
+    item[is_arc] = arc_base + np.arange(arc_rows.size)
+    item[is_poly] = poly_base + np.arange(poly_rows.size)
     out["item"] = item
     sub_arcs = ArcTable(**{f.name: getattr(arcs, f.name)[arc_rows] for f in fields(ArcTable)})
     sub_polys = PolyTable(
         coeffs=polys.coeffs[poly_rows], timing=polys.timing[poly_rows], length_err=polys.length_err[poly_rows]
     )
-    return Spans(**out, arcs=sub_arcs, polys=sub_polys)
+    return sub_arcs, sub_polys
 
 
 def pad_tables(spans: Spans, n_arcs: int, n_polys: int) -> Spans:
