@@ -296,6 +296,72 @@ def build_grid(
     )
 
 
+@dataclass(frozen=True, eq=False)
+class GridPiece:
+    """The grid rows of spans ``first..last-1`` as cut with ``counts`` (``(last - first,)``, a copy): a part of a
+    window's grid built ahead of it, or the part of the window before that the next one starts with.
+
+    Every row of a grid depends on its span and that span's count alone, bit for bit (:func:`cut_spans` is
+    elementwise; the frames and boxes evaluate each interval alone), so a window's grid can be joined from
+    pieces built for other span ranges (:func:`join_pieces`).
+    """
+
+    first: int
+    last: int
+    counts: np.ndarray
+    grid: Grid
+
+    @staticmethod
+    def of(grid: Grid, counts: np.ndarray, row: int = 0) -> GridPiece:
+        """The rows of ``grid`` from ``row`` (the first of its span) to its end, copied when ``row > 0`` (a small
+        tail: the window's arrays are not kept alive by it)."""
+        first, last = int(grid.span[row]), int(grid.span[-1]) + 1
+        if row:
+            grid = _grid_rows_copy(grid, row, len(grid))
+        return GridPiece(first, last, counts[first:last].copy(), grid)
+
+    def rows(self, first: int, last: int) -> tuple[int, int]:
+        """The rows of spans ``first..last-1`` (within the piece's)."""
+        start = int(self.counts[: first - self.first].sum())
+        return start, start + int(self.counts[first - self.first : last - self.first].sum())
+
+
+def _grid_rows_copy(grid: Grid, start: int, stop: int) -> Grid:
+    """Rows ``start..stop-1`` of ``grid``, copied (axis-major storage of exactly those columns)."""
+    major = {f: aligned_array((3, stop - start)) for f in AXIS_FIELDS}
+    for f in AXIS_FIELDS:
+        major[f][...] = grid.axis_major[f][:, start:stop]
+    one = {f: getattr(grid, f)[start:stop].copy() for f in ("span", "s_start", "delta", "curved", "boxed")}
+    return Grid(**one, axis_major=major, **{f: major[f].T for f in AXIS_FIELDS})
+
+
+def join_pieces(pieces: list[GridPiece], counts: np.ndarray, first: int, last: int, pad_to: int) -> Grid | None:
+    """The grid :func:`build_grid` makes of spans ``first..last-1`` with ``counts`` and ``pad_to``, joined from
+    ``pieces`` (consecutive span ranges), or ``None`` where they do not cover those spans with these counts."""
+    parts, at = [], first
+    for piece in pieces:
+        if piece.first <= at < piece.last:
+            stop = min(last, piece.last)
+            if not np.array_equal(piece.counts[at - piece.first : stop - piece.first], counts[at:stop]):
+                return None  # (cut finer since: never the case for boxed spans, which never refine)
+            parts.append((piece.grid, *piece.rows(at, stop)))
+            at = stop
+        if at == last:
+            break
+    if at != last:
+        return None
+    m = sum(b - a for _, a, b in parts)
+    major = {f: aligned_array((3, pad_to), zeros=True) for f in AXIS_FIELDS}
+    col = 0
+    for grid, a, b in parts:
+        for f in AXIS_FIELDS:
+            major[f][:, col : col + b - a] = grid.axis_major[f][:, a:b]
+        col += b - a
+    one = {f: np.concatenate([getattr(g, f)[a:b] for g, a, b in parts]) for f in ("span", "s_start", "delta")}
+    one |= {f: np.concatenate([getattr(g, f)[a:b] for g, a, b in parts]) for f in ("curved", "boxed")}
+    return Grid(**one, axis_major=major, **{f: major[f][:, :m].T for f in AXIS_FIELDS})
+
+
 @cache
 def _malloc_trim():
     try:

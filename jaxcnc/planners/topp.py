@@ -20,6 +20,9 @@ What each interval is allowed (per axis ``i``, ``x = v²``):
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
 from functools import cache, partial
 
@@ -37,6 +40,7 @@ from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
     Grid,
+    GridPiece,
     aligned_array,
     build_grid,
     cut_spans,
@@ -44,6 +48,7 @@ from jaxcnc.planners.grid import (
     frames_at,
     interval_counts,
     is_curved,
+    join_pieces,
     release_free_heap,
 )
 from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, junctions
@@ -478,29 +483,34 @@ def plan_topp(req: PlanRequest) -> Plan:
     if large:
         release_free_heap()  # what the junctions and the alignment's compile left
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
-    while first < n:
-        reach = np.cumsum(counts[first:])
-        last = min(n, first + max(1, int(np.searchsorted(reach, window, side="right"))))
-        grid, out = _solve_refined(req, facts, counts, first, last, x_start)
-        m = len(grid)
-        if last == n:
-            commit = m  # the program ends at rest: every node is the whole program's
-        else:
-            starts = np.flatnonzero(out["exact"][:m] & (grid.s_start == 0))
-            starts = starts[starts > 0]
-            enough = out["k0"] >= x_start * (1.0 - 1e-9) - 1e-9  # the window can stop from x_start
-            if not (enough and starts.size):
-                window *= 2  # no node of this window is settled yet: look further ahead
-                del grid, out
-                continue
-            commit = int(starts[-1])
-        segments.append(out, grid, commit)
-        x_start = float(out["x_node"][commit])
-        first = int(grid.span[commit]) if commit < m else n
-        window = WINDOW_INTERVALS
-        del grid, out  # freed before the next window's are made, not after
-        if large and segments.n == commit:
-            release_free_heap()  # the first window's working memory and its programs' compile (a first call)
+    with _GridAhead(req, counts) as ahead:
+        while first < n:
+            last = _window_end(counts, first, window)
+            built = ahead.take(first, last)  # (None: built in _solve_refined)
+            ahead.build(last)  # the spans after this window, while it is solved
+            grid, out = _solve_refined(req, facts, counts, first, last, x_start, built)
+            del built
+            m = len(grid)
+            if last == n:
+                commit = m  # the program ends at rest: every node is the whole program's
+            else:
+                starts = np.flatnonzero(out["exact"][:m] & (grid.s_start == 0))
+                starts = starts[starts > 0]
+                enough = out["k0"] >= x_start * (1.0 - 1e-9) - 1e-9  # the window can stop from x_start
+                if not (enough and starts.size):
+                    window *= 2  # no node of this window is settled yet: look further ahead
+                    ahead.keep(grid, 0)
+                    del grid, out
+                    continue
+                commit = int(starts[-1])
+            ahead.keep(grid, commit)  # the next window starts with this one's rows from commit on
+            segments.append(out, grid, commit)
+            x_start = float(out["x_node"][commit])
+            first = int(grid.span[commit]) if commit < m else n
+            window = WINDOW_INTERVALS
+            del grid, out  # freed before the next window's are made, not after
+            if large and segments.n == commit:
+                release_free_heap()  # the first window's working memory and its programs' compile (a first call)
     del facts  # (n,) arrays: dead before the alignment
     if large:
         release_free_heap()  # the windows' working memory, in pieces too small for the alignment's arrays
@@ -509,6 +519,9 @@ def plan_topp(req: PlanRequest) -> Plan:
 
 #: Intervals planned at once; a longer program is planned window by window (the same plan).
 WINDOW_INTERVALS = 1 << 17
+#: Build the grid of the spans after a window in a worker thread while the window is solved (:class:`_GridAhead`;
+#: the same plan either way).
+OVERLAP_WINDOWS = True
 _SEGMENT_KEYS = ("v0", "vp", "v1", "t_acc", "t_cru", "t_dec", "a_acc", "a_dec")
 
 
@@ -547,12 +560,99 @@ class _ProgramFacts:
         )
 
 
+def _window_end(counts: np.ndarray, first: int, window: int) -> int:
+    """The end of the window of spans from ``first`` on whose intervals add up to at most ``window`` (one span at
+    least). Every span has an interval at least: the first ``window + 1`` spans' counts decide it."""
+    reach = np.cumsum(counts[first : first + window + 1])
+    return min(len(counts), first + max(1, int(np.searchsorted(reach, window, side="right"))))
+
+
+class _GridAhead:
+    """Builds the grid of the spans after a window in one worker thread while the window is solved.
+
+    A window's grid rows depend on their spans and counts alone, bit for bit (:class:`~.grid.GridPiece`), and the
+    next window starts inside this one (at its commit point) and ends at most ``WINDOW_INTERVALS`` intervals past
+    its end: its grid is joined from this window's rows from the commit point on and the rows built ahead
+    (:func:`~.grid.join_pieces`), or built as before where they do not cover it (a window grown because none of
+    its nodes settled, counts changed since). The same grids, hence the same plan, whatever the threads' timing.
+    Only programs with blends (whose boxes make the grid's cost) use it; the worker runs under the caller's
+    default device, and its exceptions surface where its grid is taken.
+    """
+
+    def __init__(self, req: PlanRequest, counts: np.ndarray) -> None:
+        self.spans, self.counts = req.spans, counts
+        blend = req.spans.kind == SpanKind.BLEND
+        on = OVERLAP_WINDOWS and blend.any()
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcnc-grid") if on else None
+        self.blend_end = np.cumsum(blend)  # blends among the spans before k + 1
+        self.device = jax.config.jax_default_device  # thread-local: the worker enters the same
+        self.pieces: list[GridPiece] = []
+        self.pending: Future | None = None
+
+    def __enter__(self) -> _GridAhead:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.pending = None
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+
+    def _build(self, first: int, last: int) -> GridPiece:
+        """(In the worker) the piece of spans ``first..last-1``."""
+        grid = self._in_scope(build_grid, self.spans, self.counts, None, first, last)
+        return GridPiece(first, last, self.counts[first:last].copy(), grid)
+
+    def build(self, start: int) -> None:
+        """Start building the spans from ``start`` on that the next window may cover (where there are blends)."""
+        n = len(self.counts)
+        if self.pool is None or start >= n:
+            return
+        end = _window_end(self.counts, start, WINDOW_INTERVALS)
+        if self.blend_end[end - 1] - (self.blend_end[start - 1] if start else 0) == 0:
+            return  # a window without blends is planned without this grid
+        # the worker reads the counts from start on: the window being solved refines spans before start alone
+        self.pending = self.pool.submit(self._build, start, end)
+
+    def take(self, first: int, last: int) -> tuple[Grid, Callable[[], dict]] | None:
+        """The grid of spans ``first..last-1`` as :func:`~.grid.build_grid` makes it for a window, and what gives
+        their :func:`~.grid.device_spans` (uploaded in the worker meanwhile); ``None`` where not built ahead."""
+        if self.pending is not None:
+            self.pieces.append(self.pending.result())  # (the worker's exception, if any, raised here)
+            self.pending = None
+        if not self.pieces or not np.any(self.spans.kind[first:last] == SpanKind.BLEND):
+            self.pieces = []
+            return None
+        grid = join_pieces(self.pieces, self.counts, first, last, bucket_size(int(self.counts[first:last].sum())))
+        self.pieces = []
+        if grid is None:
+            return None
+        return grid, self.pool.submit(self._in_scope, device_spans, self.spans, first, last).result
+
+    def _in_scope(self, fn: Callable, *args):
+        """(In the worker) ``fn(*args)`` under the caller's default device."""
+        with jax.default_device(self.device) if self.device is not None else nullcontext():
+            return fn(*args)
+
+    def keep(self, grid: Grid | _Intervals, row: int) -> None:
+        """Keep the rows of ``grid`` (a window's) from ``row`` (the first of a span) on for the next window."""
+        if self.pool is not None and isinstance(grid, Grid) and row < len(grid):
+            self.pieces = [GridPiece.of(grid, self.counts, row)]
+
+
 def _solve_refined(
-    req: PlanRequest, facts: _ProgramFacts, counts: np.ndarray, first: int, last: int, x_start: float
+    req: PlanRequest,
+    facts: _ProgramFacts,
+    counts: np.ndarray,
+    first: int,
+    last: int,
+    x_start: float,
+    ahead: tuple[Grid, Callable[[], dict]] | None = None,
 ) -> tuple[Grid | _Intervals, dict[str, np.ndarray]]:
     """Grid and plan of spans ``first..last-1``, cutting curved spans finer (``counts``, in place) until the
     interior check passes. Only this window's spans are uploaded for the grid's evaluations (the working
-    memory of a window does not grow with the program). A window without blends takes :func:`_plain_window`."""
+    memory of a window does not grow with the program). A window without blends takes :func:`_plain_window`.
+    ``ahead``: the window's grid (as :func:`~.grid.build_grid` makes it) where it is built already, and what gives
+    its :func:`~.grid.device_spans` (built meanwhile, needed after the solve)."""
     kinds = req.spans.kind[first:last]
     curved = is_curved(kinds)
     plain = not np.any(kinds == SpanKind.BLEND)
@@ -560,15 +660,21 @@ def _solve_refined(
         rows = np.flatnonzero(curved)
         arrays = _compact_device_spans(req.spans, first + rows) if rows.size else None
         compact = np.cumsum(curved) - 1  # the window's span k is row compact[k] of arrays (where curved)
-    else:
-        arrays = device_spans(req.spans, first, last) if curved.any() else None
+    else:  # blends: curved
+        grid0, fetch = ahead or (None, partial(device_spans, req.spans, first, last))
+        arrays = fetch() if grid0 is None else None
     for _ in range(MAX_REFINE):
         if plain:
             grid, out = _plain_window(req, facts, counts, arrays, curved, compact, first, last, x_start)
             bad = out.pop("bad")[: len(grid)] if "bad" in out else np.zeros(len(grid), bool)
         else:
-            grid = build_grid(req.spans, counts, arrays, first, last, pad_to=bucket_size(int(counts[first:last].sum())))
+            if grid0 is None:
+                pad_to = bucket_size(int(counts[first:last].sum()))
+                grid = build_grid(req.spans, counts, arrays, first, last, pad_to=pad_to)
+            else:
+                grid, grid0 = grid0, None  # (a refinement builds it again)
             out = _solve_grid(req, facts, grid, x_start)
+            arrays = fetch() if arrays is None else arrays
             acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
             arcs = np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC)
             bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first, "arc" if arcs else None)
