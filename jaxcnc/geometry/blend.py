@@ -49,10 +49,11 @@ from jaxcnc.geometry.spans import (
     MIN_LENGTH_MM,
     SPAN_FIELDS,
     ArcTable,
+    Chunk,
     PolyTable,
     Spans,
     assemble,
-    join_spans,
+    assemble_chunks,
     merge_polys,
     slice_spans,
 )
@@ -254,38 +255,49 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     """
     n = len(spans)
     chunks = -(-n // BLEND_CHUNK)
+    if n >= SPLIT_SPANS:  # both threads busy, on chunks of equal size
+        chunks = -(-max(chunks, BLEND_THREADS) // BLEND_THREADS) * BLEND_THREADS
     if chunks < 2:
-        return _blend_part(program, spans, corner_tol_mm, 0, n)
+        piece = _blend_part(program, spans, corner_tol_mm, 0, n)
+        return spans if piece is None else assemble(*piece)
     bounds = (np.arange(chunks + 1) * n) // chunks
 
-    def part(c: int) -> Spans:
+    def part(c: int) -> Chunk:
         lo, hi = int(bounds[c]), int(bounds[c + 1])
         a, b = max(0, lo - HALO), min(n, hi + HALO)
-        return _blend_part(program, slice_spans(spans, a, b), corner_tol_mm, lo - a, hi - a)
+        sub = slice_spans(spans, a, b)
+        piece = _blend_part(program, sub, corner_tol_mm, lo - a, hi - a)
+        if piece is None:  # nothing blended: the chunk's own spans as they are
+            rows = {key: getattr(sub, key)[lo - a : hi - a] for key in SPAN_FIELDS}
+            return [(rows, None)], np.arange(hi - lo, dtype=np.float64), sub.arcs, sub.polys
+        return piece
 
     with ThreadPoolExecutor(BLEND_THREADS, thread_name_prefix="jaxcnc-blend") as pool:
-        parts = list(pool.map(part, range(chunks)))
-    return join_spans(parts)
+        pieces = list(pool.map(part, range(chunks)))
+    return assemble_chunks(pieces)
 
 
-#: Spans per chunk of :func:`blend_path` (a shorter path is blended in one piece).
-BLEND_CHUNK = 1 << 15
+#: Spans per chunk of :func:`blend_path`, at most.
+BLEND_CHUNK = 1 << 16
+#: A path of this many spans or more is blended in chunks (at least one per thread).
+SPLIT_SPANS = 1 << 14
 #: Neighbouring spans each chunk reads on either side (its blends depend on at most ~15 of them).
 HALO = 64
 #: Chunks blended at the same time.
 BLEND_THREADS = 2
 
 
-def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, hi: int) -> Spans:
-    """Spans ``lo..hi-1`` of ``spans`` blended (:func:`blend_path`), with the blends of the junctions after them:
-    the spans outside that range are read (their junctions with it) but not returned."""
+def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, hi: int) -> Chunk | None:
+    """Spans ``lo..hi-1`` of ``spans`` blended (:func:`blend_path`), with the blends of the junctions after them,
+    as a chunk for :func:`~jaxcnc.geometry.spans.assemble_chunks` (``None``: no junction blended): the spans outside
+    that range are read (their junctions with it) but not returned."""
     whole = lo == 0 and hi == len(spans)
     tol = junction_tolerances(program, spans, corner_tol_mm)
     t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
     turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
     j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
     if j.size == 0:
-        return spans if whole else slice_spans(spans, lo, hi)
+        return None
     half = 0.5 * spans.length
     ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
@@ -304,7 +316,7 @@ def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, h
     keep &= ell > MIN_LENGTH_MM
     j, ell, lines = j[keep], ell[keep], lines[keep]
     if j.size == 0:
-        return spans if whole else slice_spans(spans, lo, hi)
+        return None
     # chords of a curve: consume them whole, and let the blends meet with a common curvature, where
     # that keeps them within tol (else back to symmetric cuts and the line's own curvature, 0)
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
@@ -345,7 +357,7 @@ def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, h
     # a blend's pieces before its second span, in order
     piece_key = j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))
     key = np.concatenate([np.flatnonzero(alive).astype(np.float64), piece_key if mine is None else piece_key[mine]])
-    return assemble([(trimmed, alive), (fields_, mine)], key, arcs, merge_polys([spans.polys, table]))
+    return [(trimmed, alive), (fields_, mine)], key, arcs, merge_polys([spans.polys, table])
 
 
 def _blend_fields(

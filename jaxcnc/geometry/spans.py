@@ -342,6 +342,10 @@ def merge_polys(tables: list[PolyTable]) -> PolyTable:
 _FIELD_DTYPES = {"kind": np.int8, "block": np.int32, "item": np.int32}
 
 
+#: One chunk of spans to assemble: ``(parts, order_key, arcs, polys)`` (see :func:`assemble_chunks`).
+Chunk = tuple[list[tuple[dict[str, np.ndarray], np.ndarray | None]], np.ndarray, ArcTable, PolyTable]
+
+
 def assemble(
     parts: list[tuple[dict[str, np.ndarray], np.ndarray | None]],
     order_key: np.ndarray,
@@ -355,29 +359,54 @@ def assemble(
     placed straight into its sorted position and dropped from its part's dict (the parts are consumed), so
     beside the result at most one field of one part is copied at a time.
     """
-    order = np.argsort(order_key, kind="stable")
-    n = order.size
-    pos = np.empty(n, np.int64)
-    pos[order] = np.arange(n)  # where each kept row goes
-    del order
+    return assemble_chunks([(parts, order_key, arcs, polys)])
+
+
+def assemble_chunks(chunks: list[Chunk]) -> Spans:
+    """:class:`Spans` of several chunks one after the other, each assembled as :func:`assemble` does (its parts'
+    kept rows sorted by its key, ``item`` rows of its own tables), the tables joined and ``item`` renumbered into
+    them. The chunks' parts are consumed field by field, as in :func:`assemble`."""
+    at, pos, starts = 0, [], []
+    for _, key, _, _ in chunks:
+        order = np.argsort(key, kind="stable")
+        where = np.empty(order.size, np.int64)
+        where[order] = at + np.arange(order.size)  # where each kept row goes
+        pos.append(where)
+        starts.append(at)
+        at += order.size
+        del order
     out = {}
     for key in SPAN_FIELDS:
-        cols = [np.asarray(p[key]) for p, _ in parts]
+        cols = [np.asarray(p[key]) for parts, _, _, _ in chunks for p, _ in parts]
         dtype = _FIELD_DTYPES.get(key, np.result_type(*cols))
-        a = np.empty((n,) + cols[0].shape[1:], dtype)
+        a = np.empty((at,) + cols[0].shape[1:], dtype)
         del cols
-        at = 0
-        for p, rows in parts:
-            v = np.asarray(p.pop(key))
-            v = v if rows is None else v[rows]
-            if v.ndim > 1 and v.dtype == a.dtype:  # whole rows as opaque items: one index per row, not per value
-                _as_rows(a)[pos[at : at + v.shape[0]]] = _as_rows(v)
-            else:
-                a[pos[at : at + v.shape[0]]] = v
-            at += v.shape[0]
-            del v
-        a.setflags(write=False)
+        for (parts, _, _, _), where in zip(chunks, pos, strict=True):
+            i = 0
+            for p, rows in parts:
+                v = np.asarray(p.pop(key))
+                v = v if rows is None else v[rows]
+                if v.ndim > 1 and v.dtype == a.dtype:  # whole rows as opaque items: one index per row, not per value
+                    _as_rows(a)[where[i : i + v.shape[0]]] = _as_rows(v)
+                else:
+                    a[where[i : i + v.shape[0]]] = v
+                i += v.shape[0]
+                del v
         out[key] = a
+    if len(chunks) == 1:
+        arcs, polys = chunks[0][2], chunks[0][3]
+    else:  # each chunk's items after the rows of the chunks before it
+        n_arcs = n_polys = 0
+        for (_, key, c_arcs, c_polys), start in zip(chunks, starts, strict=True):
+            rows = slice(start, start + key.size)  # the chunk's rows: one run
+            kind, item = out["kind"][rows], out["item"][rows]
+            item[(kind == SpanKind.ARC) & (item >= 0)] += n_arcs
+            item[np.isin(kind, POLY_KINDS) & (item >= 0)] += n_polys
+            n_arcs, n_polys = n_arcs + len(c_arcs), n_polys + len(c_polys)
+        arcs = ArcTable(**{f.name: np.concatenate([getattr(c[2], f.name) for c in chunks]) for f in fields(ArcTable)})
+        polys = merge_polys([c[3] for c in chunks])
+    for a in out.values():
+        a.setflags(write=False)
     return Spans(**out, arcs=arcs, polys=polys)
 
 
@@ -417,27 +446,6 @@ def concat_spans(
         else empty_arcs()
     )
     return assemble([(f, None) for f, _ in parts], order_key, arc_table, merge_polys(polys))
-
-
-def join_spans(parts: list[Spans]) -> Spans:
-    """The spans of ``parts`` one after the other, as one :class:`Spans`: each part's arc and poly rows that its spans
-    use (in their order), ``item`` renumbered into the joined tables. The list is consumed (emptied): each field's
-    columns are dropped as soon as they are joined, so beside the result at most one field is copied at a time."""
-    fields_, arcs, polys = [], [], []
-    for sp in parts:
-        f = {key: getattr(sp, key) for key in SPAN_FIELDS}
-        sub_arcs, sub_polys = _used_rows(f, sp.arcs, sp.polys, sum(map(len, arcs)), sum(map(len, polys)))
-        arcs.append(sub_arcs)
-        polys.append(sub_polys)
-        fields_.append(f)
-    parts.clear()  # the parts' arrays now live in fields_ alone
-    out = {}
-    for key in SPAN_FIELDS:
-        a = np.concatenate([f.pop(key) for f in fields_])
-        a.setflags(write=False)
-        out[key] = a
-    arc_table = ArcTable(**{a.name: np.concatenate([getattr(t, a.name) for t in arcs]) for a in fields(ArcTable)})
-    return Spans(**out, arcs=arc_table, polys=merge_polys(polys))
 
 
 def program_spans(program: Program) -> Spans:
@@ -490,28 +498,20 @@ def take_spans(spans: Spans, rows: np.ndarray) -> Spans:
 
 def _own_tables(spans: Spans, out: dict[str, np.ndarray]) -> Spans:
     """``out`` (some rows of ``spans``' fields) with the arc and poly rows they use, ``item`` renumbered."""
-    sub_arcs, sub_polys = _used_rows(out, spans.arcs, spans.polys)
-    out["item"].setflags(write=False)
-    return Spans(**out, arcs=sub_arcs, polys=sub_polys)
-
-
-def _used_rows(
-    out: dict[str, np.ndarray], arcs: ArcTable, polys: PolyTable, arc_base: int = 0, poly_base: int = 0
-) -> tuple[ArcTable, PolyTable]:
-    """The rows of ``arcs`` and ``polys`` that the span fields ``out`` use, in the spans' order; ``out["item"]``
-    replaced by a copy numbering them from ``arc_base`` / ``poly_base``."""
     kind, item = out["kind"], out["item"].copy()
+    arcs, polys = spans.arcs, spans.polys
     is_arc = (kind == SpanKind.ARC) & (item >= 0)
     is_poly = np.isin(kind, POLY_KINDS) & (item >= 0)
     arc_rows, poly_rows = item[is_arc], item[is_poly]
-    item[is_arc] = arc_base + np.arange(arc_rows.size)
-    item[is_poly] = poly_base + np.arange(poly_rows.size)
+    item[is_arc] = np.arange(arc_rows.size)
+    item[is_poly] = np.arange(poly_rows.size)
+    item.setflags(write=False)
     out["item"] = item
     sub_arcs = ArcTable(**{f.name: getattr(arcs, f.name)[arc_rows] for f in fields(ArcTable)})
     sub_polys = PolyTable(
         coeffs=polys.coeffs[poly_rows], timing=polys.timing[poly_rows], length_err=polys.length_err[poly_rows]
     )
-    return sub_arcs, sub_polys
+    return Spans(**out, arcs=sub_arcs, polys=sub_polys)
 
 
 def pad_tables(spans: Spans, n_arcs: int, n_polys: int) -> Spans:
