@@ -31,6 +31,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+from functools import cache
 
 #: ``mallopt`` parameter numbers (glibc's malloc.h).
 M_TRIM_THRESHOLD = -1
@@ -82,4 +83,26 @@ def tune_heap() -> bool:
     return fix_thresholds() and arenas
 
 
-__all__ = ["PLANNING_ARENAS", "fix_thresholds", "limit_arenas", "tune_heap"]
+@cache
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or ``None`` on other C libraries."""
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+    except (OSError, AttributeError):  # not glibc: nothing to do
+        return None
+
+
+def release_free_heap() -> None:
+    """Hand the C heap's free pages back to the operating system (glibc's ``malloc_trim``; a no-op elsewhere).
+
+    The arrays of a planning stage or window (NumPy's and XLA's alike) are freed to glibc's heap, which keeps
+    pages it cannot trim from the top mapped, in pieces a later stage's larger arrays do not fit: the resident
+    memory of a long program would grow by what earlier stages left behind. The cost is in the page faults
+    of memory used again afterwards, so large plans call it between stages only (``topp.TRIM_SEGMENTS``).
+    """
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
+
+
+__all__ = ["PLANNING_ARENAS", "fix_thresholds", "limit_arenas", "release_free_heap", "tune_heap"]

@@ -27,6 +27,7 @@ import numpy as np
 
 from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
 from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
+from jaxcnc.memory import release_free_heap
 from jaxcnc.program import Kind, Program
 
 __all__ = ["ArcTable", "PolyTable", "SpanKind", "Spans", "program_spans", "CURVED_KINDS", "POLY_KINDS"]
@@ -362,10 +363,17 @@ def assemble(
     return assemble_chunks([(parts, order_key, arcs, polys)])
 
 
+#: Spans from which :func:`assemble_chunks` hands each field's freed chunk columns back to the system.
+TRIM_ROWS = 1 << 18
+
+
 def assemble_chunks(chunks: list[Chunk]) -> Spans:
     """:class:`Spans` of several chunks one after the other, each assembled as :func:`assemble` does (its parts'
     kept rows sorted by its key, ``item`` rows of its own tables), the tables joined and ``item`` renumbered into
-    them. The chunks' parts are consumed field by field, as in :func:`assemble`."""
+    them. The chunks' parts are consumed field by field, as in :func:`assemble`. Chunks built on worker threads
+    were allocated in those threads' malloc arenas, whose freed pages the arrays made here cannot reuse: for long
+    paths (``TRIM_ROWS`` spans or more) each field's freed columns are handed back at once, else every field would
+    be resident twice at the end (1 M blocks: 340 MB more at the peak)."""
     at, pos, starts = 0, [], []
     for _, key, _, _ in chunks:
         order = np.argsort(key, kind="stable")
@@ -393,6 +401,8 @@ def assemble_chunks(chunks: list[Chunk]) -> Spans:
                 i += v.shape[0]
                 del v
         out[key] = a
+        if len(chunks) > 1 and at >= TRIM_ROWS:
+            release_free_heap()  # the chunks were built on other threads: their freed pages serve no one here
     if len(chunks) == 1:
         arcs, polys = chunks[0][2], chunks[0][3]
     else:  # each chunk's items after the rows of the chunks before it

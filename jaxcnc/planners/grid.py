@@ -25,10 +25,8 @@ the same motion at any tick rate.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 from dataclasses import dataclass
-from functools import cache, partial, reduce
+from functools import partial, reduce
 
 import jax
 import jax.numpy as jnp
@@ -39,6 +37,7 @@ from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, slice_spans
 from jaxcnc.jaxconfig import on_cpu  # (and float64)
+from jaxcnc.memory import release_free_heap  # noqa: F401  (the planners' import of it)
 
 MAX_TURN_RAD = 0.0175  # 1°
 #: A boxed (blend) interval turns at most this much, and a blend piece has at least this many
@@ -298,8 +297,9 @@ def build_grid(
 
 @dataclass(frozen=True, eq=False)
 class GridPiece:
-    """The grid rows of spans ``first..last-1`` as cut with ``counts`` (``(last - first,)``, a copy): a part of a
-    window's grid built ahead of it, or the part of the window before that the next one starts with.
+    """The grid rows of spans ``first..last-1`` as cut with ``counts`` (``(last - first,)``, not shared): a part of
+    a window's grid built ahead of it (with ``arrays``, the :func:`device_spans` of its spans), or the part of the
+    window before that the next one starts with.
 
     Every row of a grid depends on its span and that span's count alone, bit for bit (:func:`cut_spans` is
     elementwise; the frames and boxes evaluate each interval alone), so a window's grid can be joined from
@@ -310,6 +310,7 @@ class GridPiece:
     last: int
     counts: np.ndarray
     grid: Grid
+    arrays: dict | None = None
 
     @staticmethod
     def of(grid: Grid, counts: np.ndarray, row: int = 0) -> GridPiece:
@@ -326,30 +327,35 @@ class GridPiece:
         return start, start + int(self.counts[first - self.first : last - self.first].sum())
 
 
+#: The grid's ``(m,)`` fields.
+_ROW_FIELDS = ("span", "s_start", "delta", "curved", "boxed")
+
+
 def _grid_rows_copy(grid: Grid, start: int, stop: int) -> Grid:
     """Rows ``start..stop-1`` of ``grid``, copied (axis-major storage of exactly those columns)."""
     major = {f: aligned_array((3, stop - start)) for f in AXIS_FIELDS}
     for f in AXIS_FIELDS:
         major[f][...] = grid.axis_major[f][:, start:stop]
-    one = {f: getattr(grid, f)[start:stop].copy() for f in ("span", "s_start", "delta", "curved", "boxed")}
+    one = {f: getattr(grid, f)[start:stop].copy() for f in _ROW_FIELDS}
     return Grid(**one, axis_major=major, **{f: major[f].T for f in AXIS_FIELDS})
 
 
 def join_pieces(pieces: list[GridPiece], counts: np.ndarray, first: int, last: int, pad_to: int) -> Grid | None:
     """The grid :func:`build_grid` makes of spans ``first..last-1`` with ``counts`` and ``pad_to``, joined from
-    ``pieces`` (consecutive span ranges), or ``None`` where they do not cover those spans with these counts."""
+    ``pieces`` (the first that covers a span with its count, in their order), or ``None`` where they do not cover
+    those spans with these counts (spans cut finer since the piece was built)."""
     parts, at = [], first
-    for piece in pieces:
-        if piece.first <= at < piece.last:
+    while at < last:
+        for piece in pieces:
             stop = min(last, piece.last)
-            if not np.array_equal(piece.counts[at - piece.first : stop - piece.first], counts[at:stop]):
-                return None  # (cut finer since: never the case for boxed spans, which never refine)
-            parts.append((piece.grid, *piece.rows(at, stop)))
-            at = stop
-        if at == last:
-            break
-    if at != last:
-        return None
+            if piece.first <= at < stop and np.array_equal(
+                piece.counts[at - piece.first : stop - piece.first], counts[at:stop]
+            ):
+                parts.append((piece.grid, *piece.rows(at, stop)))
+                at = stop
+                break
+        else:
+            return None
     m = sum(b - a for _, a, b in parts)
     major = {f: aligned_array((3, pad_to), zeros=True) for f in AXIS_FIELDS}
     col = 0
@@ -357,27 +363,5 @@ def join_pieces(pieces: list[GridPiece], counts: np.ndarray, first: int, last: i
         for f in AXIS_FIELDS:
             major[f][:, col : col + b - a] = grid.axis_major[f][:, a:b]
         col += b - a
-    one = {f: np.concatenate([getattr(g, f)[a:b] for g, a, b in parts]) for f in ("span", "s_start", "delta")}
-    one |= {f: np.concatenate([getattr(g, f)[a:b] for g, a, b in parts]) for f in ("curved", "boxed")}
+    one = {f: np.concatenate([getattr(g, f)[a:b] for g, a, b in parts]) for f in _ROW_FIELDS}
     return Grid(**one, axis_major=major, **{f: major[f][:, :m].T for f in AXIS_FIELDS})
-
-
-@cache
-def _malloc_trim():
-    try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
-    except (OSError, AttributeError):  # not glibc: nothing to do
-        return None
-
-
-def release_free_heap() -> None:
-    """Hand the C heap's free pages back to the operating system (glibc's ``malloc_trim``; a no-op elsewhere).
-
-    The arrays of a planning stage or window (NumPy's and XLA's alike) are freed to glibc's heap, which keeps
-    pages it cannot trim from the top mapped, in pieces a later stage's larger arrays do not fit: the resident
-    memory of a long program would grow by what earlier stages left behind. The cost is in the page faults
-    of memory used again afterwards, so large plans call it between stages only (``topp.TRIM_SEGMENTS``).
-    """
-    trim = _malloc_trim()
-    if trim is not None:
-        trim(0)
