@@ -20,7 +20,6 @@ What each interval is allowed (per axis ``i``, ``x = v²``):
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -487,7 +486,7 @@ def plan_topp(req: PlanRequest) -> Plan:
         while first < n:
             last = _window_end(counts, first, window)
             built = ahead.take(first, last)  # (None: built in _solve_refined)
-            ahead.build(last)  # the spans after this window, while it is solved
+            ahead.build(last, first)  # the spans after this window, while it is solved
             grid, out = _solve_refined(req, facts, counts, first, last, x_start, built)
             del built
             m = len(grid)
@@ -571,13 +570,19 @@ class _GridAhead:
     """Builds the grid of the spans after a window in one worker thread while the window is solved.
 
     A window's grid rows depend on their spans and counts alone, bit for bit (:class:`~.grid.GridPiece`), and the
-    next window starts inside this one (at its commit point) and ends at most ``WINDOW_INTERVALS`` intervals past
-    its end: its grid is joined from this window's rows from the commit point on and the rows built ahead
-    (:func:`~.grid.join_pieces`), or built as before where they do not cover it (a window grown because none of
-    its nodes settled, counts changed since). The same grids, hence the same plan, whatever the threads' timing.
-    Only programs with blends (whose boxes make the grid's cost) use it; the worker runs under the caller's
-    default device, and its exceptions surface where its grid is taken.
+    next window starts inside this one (at its commit point, a few spans before its end) and ends at most
+    ``WINDOW_INTERVALS`` intervals past its end: the worker builds the spans from a little before this window's end
+    (twice the last window's tail) to there, with their :func:`~.grid.device_spans` (which the next window's
+    interior check reads), from the counts as they were when it started. The next window's grid is joined from
+    those rows and this window's from its commit point on (:func:`~.grid.join_pieces`), or built as before where
+    they do not cover it with its counts (a window grown because none of its nodes settled, spans cut finer since).
+    The same grids, hence the same plan, whatever the threads' timing. Only programs with blends (whose boxes make
+    the grid's cost) use it; the worker runs under the caller's default device, and its exceptions surface where
+    its grid is taken.
     """
+
+    #: Spans before a window's end the worker starts at, at least (the last window's tail times two, else).
+    BACK_SPANS = 64
 
     def __init__(self, req: PlanRequest, counts: np.ndarray) -> None:
         self.spans, self.counts = req.spans, counts
@@ -586,7 +591,8 @@ class _GridAhead:
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcnc-grid") if on else None
         self.blend_end = np.cumsum(blend)  # blends among the spans before k + 1
         self.device = jax.config.jax_default_device  # thread-local: the worker enters the same
-        self.pieces: list[GridPiece] = []
+        self.back = self.BACK_SPANS
+        self.tail: GridPiece | None = None  # the last window's rows from its commit point on
         self.pending: Future | None = None
 
     def __enter__(self) -> _GridAhead:
@@ -597,46 +603,50 @@ class _GridAhead:
         if self.pool is not None:
             self.pool.shutdown(wait=True, cancel_futures=True)
 
-    def _build(self, first: int, last: int) -> GridPiece:
-        """(In the worker) the piece of spans ``first..last-1``."""
-        grid = self._in_scope(build_grid, self.spans, self.counts, None, first, last)
-        return GridPiece(first, last, self.counts[first:last].copy(), grid)
+    def _build(self, first: int, last: int, counts: np.ndarray) -> GridPiece:
+        """(In the worker, under the caller's default device) the piece of spans ``first..last-1`` cut by
+        ``counts`` (valid there)."""
+        with jax.default_device(self.device) if self.device is not None else nullcontext():
+            arrays = device_spans(self.spans, first, last)
+            grid = build_grid(self.spans, counts, arrays, first, last)
+        return GridPiece(first, last, counts[first:last], grid, arrays)
 
-    def build(self, start: int) -> None:
-        """Start building the spans from ``start`` on that the next window may cover (where there are blends)."""
+    def build(self, start: int, first: int) -> None:
+        """Start building the spans the window after the one of spans ``first..start-1`` may cover (where there
+        are blends)."""
         n = len(self.counts)
         if self.pool is None or start >= n:
             return
         end = _window_end(self.counts, start, WINDOW_INTERVALS)
         if self.blend_end[end - 1] - (self.blend_end[start - 1] if start else 0) == 0:
             return  # a window without blends is planned without this grid
-        # the worker reads the counts from start on: the window being solved refines spans before start alone
-        self.pending = self.pool.submit(self._build, start, end)
+        begin = max(first, start - self.back)
+        counts = np.empty(end, np.int64)  # (only begin..end-1 set) as they are now: this window may refine its own
+        counts[begin:end] = self.counts[begin:end]
+        self.pending = self.pool.submit(self._build, begin, end, counts)
 
-    def take(self, first: int, last: int) -> tuple[Grid, Callable[[], dict]] | None:
-        """The grid of spans ``first..last-1`` as :func:`~.grid.build_grid` makes it for a window, and what gives
-        their :func:`~.grid.device_spans` (uploaded in the worker meanwhile); ``None`` where not built ahead."""
-        if self.pending is not None:
-            self.pieces.append(self.pending.result())  # (the worker's exception, if any, raised here)
-            self.pending = None
-        if not self.pieces or not np.any(self.spans.kind[first:last] == SpanKind.BLEND):
-            self.pieces = []
+    def take(self, first: int, last: int) -> tuple[Grid, dict | None, int] | None:
+        """The grid of spans ``first..last-1`` as :func:`~.grid.build_grid` makes it for a window and the
+        :func:`~.grid.device_spans` of spans from the int on that cover it (``None``, 0 where not uploaded), or
+        ``None`` where not built ahead."""
+        ahead, self.pending = (None if self.pending is None else self.pending.result()), None  # (its exception)
+        pieces = [p for p in (ahead, self.tail) if p is not None]
+        self.tail = None
+        if not pieces or not np.any(self.spans.kind[first:last] == SpanKind.BLEND):
             return None
-        grid = join_pieces(self.pieces, self.counts, first, last, bucket_size(int(self.counts[first:last].sum())))
-        self.pieces = []
+        grid = join_pieces(pieces, self.counts, first, last, bucket_size(int(self.counts[first:last].sum())))
         if grid is None:
             return None
-        return grid, self.pool.submit(self._in_scope, device_spans, self.spans, first, last).result
-
-    def _in_scope(self, fn: Callable, *args):
-        """(In the worker) ``fn(*args)`` under the caller's default device."""
-        with jax.default_device(self.device) if self.device is not None else nullcontext():
-            return fn(*args)
+        if ahead is not None and ahead.first <= first and last <= ahead.last:
+            return grid, ahead.arrays, ahead.first
+        return grid, None, 0
 
     def keep(self, grid: Grid | _Intervals, row: int) -> None:
         """Keep the rows of ``grid`` (a window's) from ``row`` (the first of a span) on for the next window."""
         if self.pool is not None and isinstance(grid, Grid) and row < len(grid):
-            self.pieces = [GridPiece.of(grid, self.counts, row)]
+            self.tail = GridPiece.of(grid, self.counts, row)
+            if row:  # where the next window starts: the worker starts twice as far back
+                self.back = max(self.BACK_SPANS, 2 * (self.tail.last - self.tail.first))
 
 
 def _solve_refined(
@@ -646,13 +656,13 @@ def _solve_refined(
     first: int,
     last: int,
     x_start: float,
-    ahead: tuple[Grid, Callable[[], dict]] | None = None,
+    ahead: tuple[Grid, dict | None, int] | None = None,
 ) -> tuple[Grid | _Intervals, dict[str, np.ndarray]]:
     """Grid and plan of spans ``first..last-1``, cutting curved spans finer (``counts``, in place) until the
     interior check passes. Only this window's spans are uploaded for the grid's evaluations (the working
     memory of a window does not grow with the program). A window without blends takes :func:`_plain_window`.
-    ``ahead``: the window's grid (as :func:`~.grid.build_grid` makes it) where it is built already, and what gives
-    its :func:`~.grid.device_spans` (built meanwhile, needed after the solve)."""
+    ``ahead``: the window's grid (as :func:`~.grid.build_grid` makes it) where it is built already, and the
+    :func:`~.grid.device_spans` of spans from the int on that cover the window, if uploaded with it."""
     kinds = req.spans.kind[first:last]
     curved = is_curved(kinds)
     plain = not np.any(kinds == SpanKind.BLEND)
@@ -661,8 +671,9 @@ def _solve_refined(
         arrays = _compact_device_spans(req.spans, first + rows) if rows.size else None
         compact = np.cumsum(curved) - 1  # the window's span k is row compact[k] of arrays (where curved)
     else:  # blends: curved
-        grid0, fetch = ahead or (None, partial(device_spans, req.spans, first, last))
-        arrays = fetch() if grid0 is None else None
+        grid0, arrays, at = ahead or (None, None, first)  # (arrays: row 0 is span at)
+        if arrays is None:
+            arrays, at = device_spans(req.spans, first, last), first
     for _ in range(MAX_REFINE):
         if plain:
             grid, out = _plain_window(req, facts, counts, arrays, curved, compact, first, last, x_start)
@@ -670,14 +681,13 @@ def _solve_refined(
         else:
             if grid0 is None:
                 pad_to = bucket_size(int(counts[first:last].sum()))
-                grid = build_grid(req.spans, counts, arrays, first, last, pad_to=pad_to)
+                grid = build_grid(req.spans, counts, arrays if at == first else None, first, last, pad_to=pad_to)
             else:
                 grid, grid0 = grid0, None  # (a refinement builds it again)
             out = _solve_grid(req, facts, grid, x_start)
-            arrays = fetch() if arrays is None else arrays
             acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
             arcs = np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC)
-            bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first, "arc" if arcs else None)
+            bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, at, "arc" if arcs else None)
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
