@@ -53,6 +53,7 @@ def _count_joins(monkeypatch) -> list[int]:
 
 def _with_and_without(monkeypatch, program, machine, window: int) -> tuple[dict, dict, list]:
     monkeypatch.setattr(topp, "WINDOW_INTERVALS", window)
+    monkeypatch.setattr(topp, "_cpus", lambda: 2)  # (a machine of one CPU plans without the worker)
     monkeypatch.setattr(topp, "OVERLAP_WINDOWS", False)
     alone = _plan_arrays(plan_job(program, machine).plan)
     monkeypatch.setattr(topp, "OVERLAP_WINDOWS", True)
@@ -115,6 +116,7 @@ def test_peer_programs_in_windows_plan_the_same(monkeypatch, name):
 
 def test_a_failure_in_the_worker_surfaces_from_plan_job(monkeypatch):
     monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 9)
+    monkeypatch.setattr(topp, "_cpus", lambda: 2)
     build = topp.build_grid
 
     def failing(*args, **kwargs):

@@ -20,6 +20,7 @@ What each interval is allowed (per axis ``i``, ``x = v²``):
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -519,7 +520,8 @@ def plan_topp(req: PlanRequest) -> Plan:
 #: Intervals planned at once; a longer program is planned window by window (the same plan).
 WINDOW_INTERVALS = 1 << 17
 #: Build the grid of the spans after a window in a worker thread while the window is solved (:class:`_GridAhead`;
-#: the same plan either way).
+#: the same plan either way). On the 2-core development machine, quiet: the 100k-block contour's windows ~6 % less
+#: wall for ~6 % more CPU and one more window's grid in memory; with the other core busy, slower (docs/planning.md).
 OVERLAP_WINDOWS = True
 _SEGMENT_KEYS = ("v0", "vp", "v1", "t_acc", "t_cru", "t_dec", "a_acc", "a_dec")
 
@@ -587,7 +589,7 @@ class _GridAhead:
     def __init__(self, req: PlanRequest, counts: np.ndarray) -> None:
         self.spans, self.counts = req.spans, counts
         blend = req.spans.kind == SpanKind.BLEND
-        on = OVERLAP_WINDOWS and blend.any()
+        on = OVERLAP_WINDOWS and blend.any() and _cpus() > 1
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcnc-grid") if on else None
         self.blend_end = np.cumsum(blend)  # blends among the spans before k + 1
         self.device = jax.config.jax_default_device  # thread-local: the worker enters the same
@@ -647,6 +649,11 @@ class _GridAhead:
             self.tail = GridPiece.of(grid, self.counts, row)
             if row:  # where the next window starts: the worker starts twice as far back
                 self.back = max(self.BACK_SPANS, 2 * (self.tail.last - self.tail.first))
+
+
+def _cpus() -> int:
+    """The CPUs this process may run on (the worker thread needs a second one to gain anything)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def _solve_refined(
