@@ -115,6 +115,7 @@ def test_peer_programs_in_windows_plan_the_same(monkeypatch, name):
 
 
 def test_a_failure_in_the_worker_surfaces_from_plan_job(monkeypatch):
+    monkeypatch.setattr(topp, "OVERLAP_WINDOWS", True)
     monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 9)
     monkeypatch.setattr(topp, "_cpus", lambda: 2)
     build = topp.build_grid

@@ -35,8 +35,6 @@ tangentially by the programs that write them).
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from jaxcnc.buckets import bucket_size, pad_rows
@@ -45,18 +43,7 @@ from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.geometry.spans import (
-    MIN_LENGTH_MM,
-    SPAN_FIELDS,
-    ArcTable,
-    Chunk,
-    PolyTable,
-    Spans,
-    assemble,
-    assemble_chunks,
-    merge_polys,
-    slice_spans,
-)
+from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -244,60 +231,13 @@ def _chain_curvature(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.n
 
 
 def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
-    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring).
-
-    A long path is blended in chunks of about :data:`BLEND_CHUNK` spans, :data:`BLEND_THREADS` at a time (NumPy
-    and the compiled kernels release the GIL: both cores work), each chunk read with :data:`HALO` spans of its
-    neighbours on either side. What a junction's blend becomes depends on the spans within a few junctions of it
-    (its cut-backs, the consumed lines beside it, the chain rounds' frozen spans: at most two spans further per
-    round), so each chunk's own spans and blends come out as the whole path's would, and the working memory is
-    a few chunks' instead of the whole path's (linear in the path's length, not worse).
-    """
-    n = len(spans)
-    chunks = -(-n // BLEND_CHUNK)
-    if n >= SPLIT_SPANS:  # both threads busy, on chunks of equal size
-        chunks = -(-max(chunks, BLEND_THREADS) // BLEND_THREADS) * BLEND_THREADS
-    if chunks < 2:
-        piece = _blend_part(program, spans, corner_tol_mm, 0, n)
-        return spans if piece is None else assemble(*piece)
-    bounds = (np.arange(chunks + 1) * n) // chunks
-
-    def part(c: int) -> Chunk:
-        lo, hi = int(bounds[c]), int(bounds[c + 1])
-        a, b = max(0, lo - HALO), min(n, hi + HALO)
-        sub = slice_spans(spans, a, b)
-        piece = _blend_part(program, sub, corner_tol_mm, lo - a, hi - a)
-        if piece is None:  # nothing blended: the chunk's own spans as they are
-            rows = {key: getattr(sub, key)[lo - a : hi - a] for key in SPAN_FIELDS}
-            return [(rows, None)], np.arange(hi - lo, dtype=np.float64), sub.arcs, sub.polys
-        return piece
-
-    with ThreadPoolExecutor(BLEND_THREADS, thread_name_prefix="jaxcnc-blend") as pool:
-        pieces = list(pool.map(part, range(chunks)))
-    return assemble_chunks(pieces)
-
-
-#: Spans per chunk of :func:`blend_path`, at most.
-BLEND_CHUNK = 1 << 16
-#: A path of this many spans or more is blended in chunks (at least one per thread).
-SPLIT_SPANS = 1 << 14
-#: Neighbouring spans each chunk reads on either side (its blends depend on at most ~15 of them).
-HALO = 64
-#: Chunks blended at the same time.
-BLEND_THREADS = 2
-
-
-def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, hi: int) -> Chunk | None:
-    """Spans ``lo..hi-1`` of ``spans`` blended (:func:`blend_path`), with the blends of the junctions after them,
-    as a chunk for :func:`~jaxcnc.geometry.spans.assemble_chunks` (``None``: no junction blended): the spans outside
-    that range are read (their junctions with it) but not returned."""
-    whole = lo == 0 and hi == len(spans)
+    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring)."""
     tol = junction_tolerances(program, spans, corner_tol_mm)
     t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
     turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
     j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
     if j.size == 0:
-        return None
+        return spans
     half = 0.5 * spans.length
     ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
@@ -316,7 +256,7 @@ def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, h
     keep &= ell > MIN_LENGTH_MM
     j, ell, lines = j[keep], ell[keep], lines[keep]
     if j.size == 0:
-        return None
+        return spans
     # chords of a curve: consume them whole, and let the blends meet with a common curvature, where
     # that keeps them within tol (else back to symmetric cuts and the line's own curvature, 0)
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
@@ -350,14 +290,11 @@ def _blend_part(program: Program, spans: Spans, corner_tol_mm: float, lo: int, h
     trimmed, arcs = _trim(spans, trim_start, trim_end)
     del trim_start, trim_end
     alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
-    mine = None  # the blend pieces returned: all of them, or those of the junctions after spans lo..hi-1
-    if not whole:
-        alive[:lo], alive[hi:] = False, False
-        mine = (j[owner] >= lo) & (j[owner] < hi)
     # a blend's pieces before its second span, in order
-    piece_key = j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))
-    key = np.concatenate([np.flatnonzero(alive).astype(np.float64), piece_key if mine is None else piece_key[mine]])
-    return [(trimmed, alive), (fields_, mine)], key, arcs, merge_polys([spans.polys, table])
+    key = np.concatenate(
+        [np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))]
+    )
+    return assemble([(trimmed, alive), (fields_, None)], key, arcs, merge_polys([spans.polys, table]))
 
 
 def _blend_fields(

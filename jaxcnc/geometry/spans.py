@@ -27,7 +27,6 @@ import numpy as np
 
 from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
 from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
-from jaxcnc.memory import release_free_heap
 from jaxcnc.program import Kind, Program
 
 __all__ = ["ArcTable", "PolyTable", "SpanKind", "Spans", "program_spans", "CURVED_KINDS", "POLY_KINDS"]
@@ -343,10 +342,6 @@ def merge_polys(tables: list[PolyTable]) -> PolyTable:
 _FIELD_DTYPES = {"kind": np.int8, "block": np.int32, "item": np.int32}
 
 
-#: One chunk of spans to assemble: ``(parts, order_key, arcs, polys)`` (see :func:`assemble_chunks`).
-Chunk = tuple[list[tuple[dict[str, np.ndarray], np.ndarray | None]], np.ndarray, ArcTable, PolyTable]
-
-
 def assemble(
     parts: list[tuple[dict[str, np.ndarray], np.ndarray | None]],
     order_key: np.ndarray,
@@ -360,63 +355,29 @@ def assemble(
     placed straight into its sorted position and dropped from its part's dict (the parts are consumed), so
     beside the result at most one field of one part is copied at a time.
     """
-    return assemble_chunks([(parts, order_key, arcs, polys)])
-
-
-#: Spans from which :func:`assemble_chunks` hands each field's freed chunk columns back to the system.
-TRIM_ROWS = 1 << 18
-
-
-def assemble_chunks(chunks: list[Chunk]) -> Spans:
-    """:class:`Spans` of several chunks one after the other, each assembled as :func:`assemble` does (its parts'
-    kept rows sorted by its key, ``item`` rows of its own tables), the tables joined and ``item`` renumbered into
-    them. The chunks' parts are consumed field by field, as in :func:`assemble`. Chunks built on worker threads
-    were allocated in those threads' malloc arenas, whose freed pages the arrays made here cannot reuse: for long
-    paths (``TRIM_ROWS`` spans or more) each field's freed columns are handed back at once, else every field would
-    be resident twice at the end (1 M blocks: 340 MB more at the peak)."""
-    at, pos, starts = 0, [], []
-    for _, key, _, _ in chunks:
-        order = np.argsort(key, kind="stable")
-        where = np.empty(order.size, np.int64)
-        where[order] = at + np.arange(order.size)  # where each kept row goes
-        pos.append(where)
-        starts.append(at)
-        at += order.size
-        del order
+    order = np.argsort(order_key, kind="stable")
+    n = order.size
+    pos = np.empty(n, np.int64)
+    pos[order] = np.arange(n)  # where each kept row goes
+    del order
     out = {}
     for key in SPAN_FIELDS:
-        cols = [np.asarray(p[key]) for parts, _, _, _ in chunks for p, _ in parts]
+        cols = [np.asarray(p[key]) for p, _ in parts]
         dtype = _FIELD_DTYPES.get(key, np.result_type(*cols))
-        a = np.empty((at,) + cols[0].shape[1:], dtype)
+        a = np.empty((n,) + cols[0].shape[1:], dtype)
         del cols
-        for (parts, _, _, _), where in zip(chunks, pos, strict=True):
-            i = 0
-            for p, rows in parts:
-                v = np.asarray(p.pop(key))
-                v = v if rows is None else v[rows]
-                if v.ndim > 1 and v.dtype == a.dtype:  # whole rows as opaque items: one index per row, not per value
-                    _as_rows(a)[where[i : i + v.shape[0]]] = _as_rows(v)
-                else:
-                    a[where[i : i + v.shape[0]]] = v
-                i += v.shape[0]
-                del v
-        out[key] = a
-        if len(chunks) > 1 and at >= TRIM_ROWS:
-            release_free_heap()  # the chunks were built on other threads: their freed pages serve no one here
-    if len(chunks) == 1:
-        arcs, polys = chunks[0][2], chunks[0][3]
-    else:  # each chunk's items after the rows of the chunks before it
-        n_arcs = n_polys = 0
-        for (_, key, c_arcs, c_polys), start in zip(chunks, starts, strict=True):
-            rows = slice(start, start + key.size)  # the chunk's rows: one run
-            kind, item = out["kind"][rows], out["item"][rows]
-            item[(kind == SpanKind.ARC) & (item >= 0)] += n_arcs
-            item[np.isin(kind, POLY_KINDS) & (item >= 0)] += n_polys
-            n_arcs, n_polys = n_arcs + len(c_arcs), n_polys + len(c_polys)
-        arcs = ArcTable(**{f.name: np.concatenate([getattr(c[2], f.name) for c in chunks]) for f in fields(ArcTable)})
-        polys = merge_polys([c[3] for c in chunks])
-    for a in out.values():
+        at = 0
+        for p, rows in parts:
+            v = np.asarray(p.pop(key))
+            v = v if rows is None else v[rows]
+            if v.ndim > 1 and v.dtype == a.dtype:  # whole rows as opaque items: one index per row, not per value
+                _as_rows(a)[pos[at : at + v.shape[0]]] = _as_rows(v)
+            else:
+                a[pos[at : at + v.shape[0]]] = v
+            at += v.shape[0]
+            del v
         a.setflags(write=False)
+        out[key] = a
     return Spans(**out, arcs=arcs, polys=polys)
 
 

@@ -520,9 +520,11 @@ def plan_topp(req: PlanRequest) -> Plan:
 #: Intervals planned at once; a longer program is planned window by window (the same plan).
 WINDOW_INTERVALS = 1 << 17
 #: Build the grid of the spans after a window in a worker thread while the window is solved (:class:`_GridAhead`;
-#: the same plan either way). On the 2-core development machine, quiet: the 100k-block contour's windows ~6 % less
-#: wall for ~6 % more CPU and one more window's grid in memory; with the other core busy, slower (docs/planning.md).
-OVERLAP_WINDOWS = True
+#: the same plan either way). Off: on the 2-core development machine the 100k-block contour planned in 0.441-0.446 s
+#: without it and 0.445-0.463 s with it (quiet, min of 7), for 6-9 % more CPU and ~100 MB more at the peak — XLA
+#: already keeps both cores busy in the grid and the solve, and two threads at once each run 1.6-1.9x slower. For a
+#: machine with cores to spare (docs/planning.md).
+OVERLAP_WINDOWS = False
 _SEGMENT_KEYS = ("v0", "vp", "v1", "t_acc", "t_cru", "t_dec", "a_acc", "a_dec")
 
 
