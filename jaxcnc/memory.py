@@ -19,7 +19,7 @@ where no large block has been freed yet, or the heap was trimmed, every window's
 Which mode a process is in depended on the order of its first frees. :func:`fix_thresholds` sets both to the
 values glibc's own adjustment ends at (mmap 32 MiB, trim 64 MiB) from the start: every plan runs in the second
 mode (0-3 page faults per 100k-block plan after the first). The explicit trims of large plans
-(``grid.release_free_heap``) still hand memory back: 1 M blocks exact peaks at 913-951 MB (940 before).
+(:func:`release_free_heap`) still hand memory back: 1 M blocks exact peaks at 913-951 MB (940 before).
 
 Measured and not done: a *small* fixed mmap threshold (128 KiB-4 MiB, so that large arrays are unmapped when
 freed) lowers the 1 M-block peak a little, but every plan then faults its working memory in again: +60-130 %

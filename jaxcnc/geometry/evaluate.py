@@ -187,6 +187,10 @@ def evaluate_path(
         raise ValueError("order must be 0 to 4")
     if only not in (None, "arc", "curve", "blend"):
         raise ValueError(f"unknown span family {only!r}")
+    if trig is not None and only != "arc":
+        raise ValueError("trig is for arcs alone (only='arc')")
+    if xp is np and only is None:
+        return _evaluate_families(a, span, s, order)
     kind = a["kind"][span]
     s = xp.clip(s, 0.0, a["length"][span])
     line = kind == SpanKind.LINE
@@ -194,10 +198,6 @@ def evaluate_path(
     poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
     has_polys = a["poly_timing"].shape[-1] and only in (None, "curve", "blend")
     polys = _poly(a, span, s, order, xp, only == "blend") if has_polys else None
-    if trig is not None and only != "arc":
-        raise ValueError("trig is for arcs alone (only='arc')")
-    if xp is np and only is None:
-        return _evaluate_families(a, span, s, order)
     arcs = _arc(a, span, s, order, xp, trig) if a["arc_radius"].shape[-1] and only in (None, "arc") else None
     zero = xp.zeros_like(s)
     cols = [[] for _ in range(order + 1)]

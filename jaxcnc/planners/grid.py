@@ -37,7 +37,6 @@ from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, slice_spans
 from jaxcnc.jaxconfig import on_cpu  # (and float64)
-from jaxcnc.memory import release_free_heap  # noqa: F401  (the planners' import of it)
 
 MAX_TURN_RAD = 0.0175  # 1°
 #: A boxed (blend) interval turns at most this much, and a blend piece has at least this many

@@ -16,7 +16,7 @@ from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import AxisConfig, MachineConfig
-from jaxcnc.planners.grid import release_free_heap
+from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, coordinate_extent_mm, request_limits
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
 from jaxcnc.planners.smoothing import jerk_limited
@@ -92,7 +92,7 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
 
 
 #: Programs of at least this many rows hand the C heap's free pages back before their spans are built
-#: (:func:`~jaxcnc.planners.grid.release_free_heap`): a 1 M-block blended plan made after another one peaked
+#: (:func:`~jaxcnc.memory.release_free_heap`): a 1 M-block blended plan made after another one peaked
 #: ~120 MB higher, in the blends' build, on the pieces the first plan left (docs/planning.md, "Memory").
 TRIM_BLOCKS = 1 << 18
 

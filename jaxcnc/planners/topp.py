@@ -37,6 +37,7 @@ from jaxcnc.geometry.blend_kernel import cpu_loop_options
 from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
+from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
     Grid,
@@ -49,7 +50,6 @@ from jaxcnc.planners.grid import (
     interval_counts,
     is_curved,
     join_pieces,
-    release_free_heap,
 )
 from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, junctions
 from jaxcnc.planners.lookahead_planner import plan_lookahead
@@ -917,7 +917,7 @@ def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
 #: Plans of at least this many segments derive where their segments lie instead of storing it (the check costs
 #: ~3 % of a 100k-block plan's CPU) and hand the C heap's free pages back before the windows, after the first
 #: window (its working memory and, in a first call, its programs' compile: 1 M blocks exact 1000 -> 962-974 MB
-#: peak) and before the tick alignment (:func:`~jaxcnc.planners.grid.release_free_heap`; 1 M blocks exact:
+#: peak) and before the tick alignment (:func:`~jaxcnc.memory.release_free_heap`; 1 M blocks exact:
 #: 1251 -> 1085 MB peak at no measurable CPU). Smaller plans do not: the page faults of memory used again cost
 #: ~40 % of the CPU of a 100k-block plan. Nor does each window: 966 MB at 1 M blocks, but +25 % CPU (every 4th:
 #: 1057 MB, +7 %). Fixing glibc's mmap threshold instead (``mallopt``, so that large arrays are unmapped when
