@@ -59,6 +59,55 @@ def span_arrays(spans, xp: ModuleType = np) -> dict:
     }
 
 
+def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int) -> dict:
+    """:func:`span_arrays` (JAX) of spans ``first..last-1`` alone, row ``k`` being span ``first + k``: the spans padded
+    to ``rows`` with points, their arc and poly rows (``item`` renumbered) padded to ``table_rows`` each (0: the path
+    has none of that kind) — the values of ``span_arrays(pad_spans(pad_tables(slice_spans(...))))``, built in
+    place in column layout (the tick stage uploads one such window of a long job at a time)."""
+    import jax
+
+    from jaxcnc.geometry.spans import pad_table_rows
+
+    n = last - first
+    kind, item = spans.kind[first:last], spans.item[first:last]
+    is_arc = (kind == SpanKind.ARC) & (item >= 0)
+    is_poly = ((kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)) & (item >= 0)
+    arc_rows, poly_rows = item[is_arc], item[is_poly]
+    out_item = np.full(rows, -1, item.dtype)
+    out_item[:n] = item
+    out_item[:n][is_arc] = np.arange(arc_rows.size)
+    out_item[:n][is_poly] = np.arange(poly_rows.size)
+    out_kind = np.full(rows, SpanKind.POINT, kind.dtype)
+    out_kind[:n] = kind
+    length = np.zeros(rows)
+    length[:n] = spans.length[first:last]
+
+    def col(a: np.ndarray, take, size: int, pad) -> np.ndarray:
+        """Rows ``take`` of ``a`` ``(m, ...)`` in column layout ``(..., size)``, the rest ``pad``."""
+        src = np.moveaxis(a[take], 0, -1)
+        out = np.empty(src.shape[:-1] + (size,), a.dtype)
+        out[..., : src.shape[-1]] = src
+        out[..., src.shape[-1] :] = np.asarray(pad, a.dtype).reshape(src.shape[:-1] + (1,))
+        return out
+
+    window = slice(first, last)
+    arrays = {
+        "kind": out_kind,
+        "item": out_item,
+        "length": length,
+        "origin": col(spans.origin, window, rows, np.zeros(3)),
+        "tangent": col(spans.tangent_in, window, rows, np.zeros(3)),
+    }
+    arcs, polys = spans.arcs, spans.polys
+    arc_pad, poly_pad = pad_table_rows(polys.coeffs.shape[1:])
+    for name in ("center", "e1", "e2", "axis", "radius", "rise"):
+        arrays[f"arc_{name}"] = col(getattr(arcs, name), arc_rows, table_rows if len(arcs) else 0, arc_pad[name])
+    q = table_rows if len(polys) else 0
+    arrays["poly_coeffs"] = col(polys.coeffs, poly_rows, q, poly_pad["coeffs"])
+    arrays["poly_timing"] = col(polys.timing, poly_rows, q, poly_pad["timing"])
+    return {k: jax.device_put(v) for k, v in arrays.items()}
+
+
 def _horner(c, x, order: int, xp):
     """Value and derivatives ``[f, f', ...]`` of ``sum_k c[k] x^k`` (``c`` a sequence of arrays)."""
     deg = len(c) - 1

@@ -485,29 +485,32 @@ def _own_tables(spans: Spans, out: dict[str, np.ndarray]) -> Spans:
     return Spans(**out, arcs=sub_arcs, polys=sub_polys)
 
 
-def pad_tables(spans: Spans, n_arcs: int, n_polys: int) -> Spans:
-    """``spans`` with its arc and poly tables padded to ``n_arcs`` / ``n_polys`` rows (rows no span refers to:
-    a unit circle, a straight quintic), so that compiled kernels see few table sizes."""
-    arcs, polys = spans.arcs, spans.polys
-    k, q = n_arcs - len(arcs), n_polys - len(polys)
-    if k < 0 or q < 0:
-        raise ValueError("cannot pad to fewer rows")
+def pad_table_rows(coeff_shape: tuple[int, ...]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The rows :func:`pad_tables` appends (no span refers to them): an arc table's (a unit circle) and a poly
+    table's with coefficients ``coeff_shape`` ``(p+1, 4)`` (a straight polynomial, weight 1), field by field."""
     unit = dict(center=(0, 0, 0), e1=(1, 0, 0), e2=(0, 1, 0), axis=(0, 0, 1), radius=1, rise=0, sweep=1)
-    pad_arcs = ArcTable(
-        **{
-            name: np.concatenate([getattr(arcs, name), np.broadcast_to(np.asarray(v, np.float64), (k,) + np.shape(v))])
-            for name, v in unit.items()
-        }
-    )
-    line = np.zeros(polys.coeffs.shape[1:])
+    arc = {name: np.asarray(v, np.float64) for name, v in unit.items()}
+    line = np.zeros(coeff_shape)
     line[0, 3] = 1.0  # weight 1
     if line.shape[0] > 1:
         line[1, 0] = 1.0  # x = u
     timing = np.zeros(6)
     timing[1] = 1.0  # u = s / length
-    pad_polys = PolyTable(
-        coeffs=np.concatenate([polys.coeffs, np.broadcast_to(line, (q,) + line.shape)]),
-        timing=np.concatenate([polys.timing, np.broadcast_to(timing, (q, 6))]),
-        length_err=np.concatenate([polys.length_err, np.zeros(q)]),
-    )
+    return arc, {"coeffs": line, "timing": timing, "length_err": np.zeros(())}
+
+
+def pad_tables(spans: Spans, n_arcs: int, n_polys: int) -> Spans:
+    """``spans`` with its arc and poly tables padded to ``n_arcs`` / ``n_polys`` rows (rows no span refers to:
+    a unit circle, a straight quintic, :func:`pad_table_rows`), so that compiled kernels see few table sizes."""
+    arcs, polys = spans.arcs, spans.polys
+    k, q = n_arcs - len(arcs), n_polys - len(polys)
+    if k < 0 or q < 0:
+        raise ValueError("cannot pad to fewer rows")
+    arc_pad, poly_pad = pad_table_rows(polys.coeffs.shape[1:])
+
+    def padded(table, pad: dict[str, np.ndarray], rows: int) -> dict[str, np.ndarray]:
+        return {k: np.concatenate([getattr(table, k), np.broadcast_to(v, (rows,) + v.shape)]) for k, v in pad.items()}
+
+    pad_arcs = ArcTable(**padded(arcs, arc_pad, k))
+    pad_polys = PolyTable(**padded(polys, poly_pad, q))
     return Spans(**{key: getattr(spans, key) for key in SPAN_FIELDS}, arcs=pad_arcs, polys=pad_polys)

@@ -166,6 +166,21 @@ class DeviceLaw(NamedTuple):
     arrays: dict
 
 
+class LawWindow(NamedTuple):
+    """Part of a time law as the tick stage samples a long job, window by window (:meth:`TimeLaw.device_window`).
+
+    Attributes:
+        law: the window's :class:`DeviceLaw`; its ``fn`` gives span indices counted from ``span_first``.
+        span_first, span_last: the spans the window's ticks lie on (``span_last`` excluded).
+        tick_end: the window holds ticks from the one it was asked for up to ``tick_end`` (excluded).
+    """
+
+    law: DeviceLaw
+    span_first: int
+    span_last: int
+    tick_end: int
+
+
 class TimeLaw(abc.ABC):
     """The time law ``s(t)`` of a whole program, whatever planned it: what the tick stage samples.
 
@@ -204,6 +219,12 @@ class TimeLaw(abc.ABC):
     @abc.abstractmethod
     def device_law(self) -> DeviceLaw:
         """The arrays and the static function the tick stage's kernel samples (see :class:`DeviceLaw`)."""
+
+    def device_window(self, tick: int, segments: int) -> LawWindow | None:
+        """The law over at most ``segments`` segments from the one that holds ``tick``, its arrays padded to
+        ``segments`` rows (one compiled shape for every window): what the tick stage holds on the device at once
+        for a long job. ``None`` (this default): the law is sampled whole (:meth:`device_law`)."""
+        return None
 
 
 class Planner(abc.ABC):

@@ -25,7 +25,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.planners.motion import trapezoid_position, trapezoid_speed, trapezoid_time_at, trapezoids
-from jaxcnc.planners.protocol import GROUP_END_TOL_TICKS, DeviceLaw, TimeLaw
+from jaxcnc.planners.protocol import GROUP_END_TOL_TICKS, DeviceLaw, LawWindow, TimeLaw
 
 __all__ = ["PLAN_KEYS", "Plan", "align_to_ticks", "plan_from_outputs", "sample_plan", "trapezoids"]
 
@@ -90,16 +90,33 @@ class Plan(TimeLaw):
     def device_law(self) -> DeviceLaw:
         """The segments padded to a bucket (padding never found: first tick ``int64 max``) and :func:`plan_span_s`."""
         n = len(self)
-        m = bucket_size(n)
+        return DeviceLaw(plan_span_s, self._device_rows(0, n, bucket_size(n)))
+
+    def device_window(self, tick: int, segments: int) -> LawWindow:
+        """Segments ``k0 .. k0 + segments`` (fewer at the end), ``k0`` the one that holds ``tick``, padded to
+        ``segments`` rows, their spans counted from ``span[k0]``. Their ticks are found in the window as in the
+        whole law (the last segment whose first tick is at or before the tick) up to the first tick of the
+        segment after them: ``tick_end``."""
+        n = len(self)
+        k0 = int(np.clip(np.searchsorted(self.first_tick, tick, side="right") - 1, 0, n - 1))
+        k1 = min(k0 + segments, n)
+        tick_end = int(self.first_tick[k1]) if k1 < n else self.n_ticks + 1
+        span0 = int(self.span[k0])
+        law = DeviceLaw(plan_span_s, self._device_rows(k0, k1, segments, span0))
+        return LawWindow(law, span0, int(self.span[k1 - 1]) + 1, tick_end)
+
+    def _device_rows(self, k0: int, k1: int, rows: int, span0: int = 0) -> dict:
+        """Segments ``k0..k1-1`` as device arrays of ``rows`` rows (the padding's first tick ``int64 max``: never
+        found), their span indices less ``span0``."""
         big = np.iinfo(np.int64).max
-
-        def pad(a: np.ndarray, fill) -> np.ndarray:
-            return np.pad(a, [(0, m - n)] + [(0, 0)] * (a.ndim - 1), constant_values=fill)
-
-        keys = PLAN_KEYS + ("length", "span", "s_start")
-        arrays = {k: jax.device_put(pad(getattr(self, k), big if k == "first_tick" else 0)) for k in keys}
+        arrays = {}
+        for k in PLAN_KEYS + ("length", "span", "s_start"):
+            a = getattr(self, k)[k0:k1]
+            out = np.full(rows, big if k == "first_tick" else 0, a.dtype)
+            out[: k1 - k0] = a - span0 if k == "span" else a
+            arrays[k] = jax.device_put(out)
         arrays["tick_hz"] = jax.device_put(np.float64(self.tick_hz))
-        return DeviceLaw(plan_span_s, arrays)
+        return arrays
 
 
 #: The per-segment outputs of :func:`trapezoids` + :func:`align_to_ticks` that a :class:`Plan` keeps.

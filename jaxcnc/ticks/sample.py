@@ -11,9 +11,9 @@ position each tick — rounding never accumulates.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from functools import partial
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -22,7 +22,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.format import FINE_SCALE
-from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.evaluate import evaluate_path, span_arrays, window_span_arrays
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.planners.job import PlannedJob
 
@@ -83,27 +83,78 @@ def machine_axes(program_p: np.ndarray, axis_source: np.ndarray, home: np.ndarra
     return out
 
 
-class TickSampler:
-    """Samples a planned job at its tick rate, chunk by chunk, in machine-axis order (any time law)."""
+#: Segments of a time law the tick stage holds on the device at once. A longer plan is sampled window by window
+#: (:meth:`~jaxcnc.planners.protocol.TimeLaw.device_window`): its segments and the spans under them uploaded a window
+#: at a time, every window in one shape, so the tick stage's memory does not grow with the job (a 1 M-block blended
+#: contour, 5.2 M segments: 2.8 GB peak with the whole law on the device, docs/planning.md "Memory").
+WINDOW_SEGMENTS = 1 << 17
 
-    def __init__(self, job: PlannedJob, chunk: int = CHUNK_TICKS):
+
+class _Window(NamedTuple):
+    """The part of a long job on the device: ticks ``tick_from..tick_end-1``, its law, its spans from ``span0``."""
+
+    tick_from: int
+    tick_end: int
+    fn: Callable
+    law: dict
+    spans: dict
+    span0: int
+
+
+class TickSampler:
+    """Samples a planned job at its tick rate, chunk by chunk, in machine-axis order (any time law).
+
+    A time law of more than ``window_segments`` segments that offers windows is held on the device a window at a
+    time (:data:`WINDOW_SEGMENTS`): the same positions, bit for bit."""
+
+    def __init__(self, job: PlannedJob, chunk: int = CHUNK_TICKS, window_segments: int = WINDOW_SEGMENTS):
         self.job, self.chunk = job, chunk
         m_axes = job.machine.axis_names
         self._src = np.asarray(job.axis_source)
         self._home = np.array([job.machine.axis(a).home for a in m_axes])
-        self._law_fn, self._law = job.plan.device_law()
-        self._spans = span_arrays(pad_spans(job.spans, bucket_size(len(job.spans))), xp=jnp)
+        self._window_segments = window_segments
+        self._window: _Window | None = None
+        self._windowed = len(job.plan) > window_segments and job.plan.device_window(0, 1) is not None
+        if not self._windowed:
+            self._law_fn, self._law = job.plan.device_law()
+            self._spans = span_arrays(pad_spans(job.spans, bucket_size(len(job.spans))), xp=jnp)
 
     @property
     def n_rows(self) -> int:
         return self.job.plan.n_ticks + 1
 
     def program_positions(self, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
-        """Exact x, y, z positions ``(count, 3)`` mm and span index of ticks ``first..``."""
-        p, span = _positions_chunk(
-            np.int64(first), np.int64(self.job.plan.n_ticks), self._law_fn, self._law, self._spans, self.chunk
-        )
-        return np.asarray(p)[:count], np.asarray(span)[:count]
+        """Exact x, y, z positions ``(count, 3)`` mm and span index of ticks ``first..`` (at most a chunk)."""
+        n_last = np.int64(self.job.plan.n_ticks)
+        if not self._windowed:
+            p, span = _positions_chunk(np.int64(first), n_last, self._law_fn, self._law, self._spans, self.chunk)
+            return np.asarray(p)[:count], np.asarray(span)[:count]
+        p_out, span_out = np.empty((count, 3)), np.empty(count, np.int64)
+        done = 0
+        while done < count:  # the chunk's ticks from the window that holds them (more than one where a window ends)
+            tick = first + done
+            w = self._window_at(tick)
+            p, span = _positions_chunk(np.int64(tick), n_last, w.fn, w.law, w.spans, self.chunk)
+            k = min(count - done, w.tick_end - tick)
+            p_out[done : done + k] = np.asarray(p)[:k]
+            span_out[done : done + k] = np.asarray(span)[:k] + w.span0
+            done += k
+        return p_out, span_out
+
+    def _window_at(self, tick: int) -> _Window:
+        """The device window that holds ``tick`` (the current one, or the next one uploaded in its place)."""
+        w = self._window
+        if w is None or not w.tick_from <= tick < w.tick_end:
+            self._window = None  # the one before freed first
+            n_ticks = self.job.plan.n_ticks
+            win = self.job.plan.device_window(min(tick, n_ticks), self._window_segments)
+            if win.tick_end <= min(tick, n_ticks):
+                raise RuntimeError(f"tick {tick}: no window of {self._window_segments} segments holds it (a bug)")
+            rows = max(self._window_segments, bucket_size(win.span_last - win.span_first))
+            spans = window_span_arrays(self.job.spans, win.span_first, win.span_last, rows, rows)
+            end = win.tick_end if win.tick_end <= n_ticks else np.iinfo(np.int64).max  # the last: and past the end
+            w = self._window = _Window(tick, end, win.law.fn, win.law.arrays, spans, win.span_first)
+        return w
 
     def machine_positions(self, program_p: np.ndarray) -> np.ndarray:
         """Map program x, y, z columns to the machine's axes (undriven axes stay at home)."""
