@@ -365,9 +365,13 @@ class ProgramPath:
         self.is_curve = (kind == Kind.CURVE) & (pr.curve >= 0)
         line_len = np.linalg.norm(pr.end - pr.start, axis=1)
         self.moving = self.is_arc | self.is_curve | ((kind == Kind.LINE) & (line_len > 0))
-        self.arcs = (
-            make_arcs(pr.start, pr.end, np.nan_to_num(pr.center), np.where(pr.turn < 0, -1, 1), pr.plane) if n else None
-        )
+        arc_rows = np.flatnonzero(self.is_arc)  # the arcs of the arc rows alone (row r is arc arc_of[r])
+        self.arc_of = np.full(n, -1, np.int64)
+        self.arc_of[arc_rows] = np.arange(arc_rows.size)
+        self.arcs = make_arcs(
+            pr.start[arc_rows], pr.end[arc_rows], np.nan_to_num(pr.center[arc_rows]),
+            np.where(pr.turn[arc_rows] < 0, -1, 1), pr.plane[arc_rows],
+        )  # fmt: skip
         self._curves: dict[int, CurveDistance] = {}
         # nearest moving rows strictly before and after each row (-1: none)
         idx = np.arange(n)
@@ -415,7 +419,7 @@ class ProgramPath:
         t_out = t_in.copy()
         if self.is_arc.any():
             a = np.flatnonzero(self.is_arc)
-            t_in[a], t_out[a] = self.arcs.take(a).tangents()
+            t_in[a], t_out[a] = self.arcs.tangents()
         for r in np.flatnonzero(self.is_curve):
             t_in[r], t_out[r] = self.curve(int(pr.curve[r])).end_tangents()
         return t_in, t_out
@@ -426,7 +430,7 @@ class ProgramPath:
         out = segment_distance(p, pr.start[rows], pr.end[rows])  # lines; points for rows that stand
         arc = np.flatnonzero(self.is_arc[rows])
         if arc.size:
-            out[arc] = arc_distance(p[arc], self.arcs.take(rows[arc]))
+            out[arc] = arc_distance(p[arc], self.arcs.take(self.arc_of[rows[arc]]))
         crv = np.flatnonzero(self.is_curve[rows])
         if crv.size:
             ids = pr.curve[rows[crv]]
