@@ -139,13 +139,14 @@ class TickSampler:
             p_out[done : done + k] = np.asarray(p)[:k]
             span_out[done : done + k] = np.asarray(span)[:k] + w.span0
             done += k
+            del w, p, span  # the next window is made with this one freed
         return p_out, span_out
 
     def _window_at(self, tick: int) -> _Window:
         """The device window that holds ``tick`` (the current one, or the next one uploaded in its place)."""
         w = self._window
         if w is None or not w.tick_from <= tick < w.tick_end:
-            self._window = None  # the one before freed first
+            self._window = w = None  # the one before freed first
             n_ticks = self.job.plan.n_ticks
             win = self.job.plan.device_window(min(tick, n_ticks), self._window_segments)
             if win.tick_end <= min(tick, n_ticks):

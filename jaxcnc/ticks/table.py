@@ -16,6 +16,7 @@ import jaxcnc
 from jaxcnc.format import EVENT_DTYPE, EventKind, TableWriter, file_sha256, fixed_to_mm
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.machine import MachineConfig
+from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.laser import LatencyShift, power_of_rows, shift_laser_events
@@ -238,4 +239,12 @@ def write_table(
     meta = table_meta(
         m, job.program.file, planner, job.plan.total_time_s, start_mm=start, n_blocks=job.program.n_blocks, **more
     )
-    return write_samples(path, job.machine, TickSampler(job), job_events(job), meta, progress, power_scale=scale)
+    events = job_events(job)
+    if len(job.spans) >= TRIM_SPANS:
+        release_free_heap()  # the events' sort and search temporaries, before the tick windows
+    return write_samples(path, job.machine, TickSampler(job), events, meta, progress, power_scale=scale)
+
+
+#: Jobs of at least this many spans hand the heap's free pages back after making their events (the 1 M-block
+#: contour's: ~130 MB of temporaries that would stay resident under the tick windows).
+TRIM_SPANS = 1 << 18
