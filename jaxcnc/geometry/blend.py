@@ -328,7 +328,11 @@ def _blend_fields(
         row[order] = np.arange(order.size)  # the row of the i-th piece kept (rounds in order)
         kept = [np.flatnonzero(p[2]) for p in parts]
         del order
-        out = {f: _placed(parts, kept, row, lambda p, f=f: p[0][f]) for f in parts[0][0]}
+        out = {}
+        for f in list(parts[0][0]):  # each field's pieces freed once placed (the caller's dict of the first round's
+            out[f] = _placed(parts, kept, row, lambda p, f=f: p[0][f])  # too): one field at a time is held twice
+            for p in parts:
+                p[0].pop(f)
         out["origin"] = _placed(parts, kept, row, lambda p: p[1][:, 0])
         out["owner"] = _placed(parts, kept, row, lambda p: p[3])
         del row, kept
