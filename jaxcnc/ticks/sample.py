@@ -25,6 +25,7 @@ from jaxcnc.format import FINE_SCALE
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays, window_span_arrays
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.planners.job import PlannedJob
+from jaxcnc.planners.protocol import LawWindow
 
 CHUNK_TICKS = 1 << 16
 
@@ -114,8 +115,11 @@ class TickSampler:
         self._home = np.array([job.machine.axis(a).home for a in m_axes])
         self._window_segments = window_segments
         self._window: _Window | None = None
-        self._windowed = len(job.plan) > window_segments and job.plan.device_window(0, 1) is not None
-        if not self._windowed:
+        first = job.plan.device_window(0, window_segments) if len(job.plan) > window_segments else None
+        self._windowed = first is not None  # (None: a law sampled whole)
+        if self._windowed:
+            self._window = self._upload(0, first)
+        else:
             self._law_fn, self._law = job.plan.device_law()
             self._spans = span_arrays(pad_spans(job.spans, bucket_size(len(job.spans))), xp=jnp)
 
@@ -147,15 +151,19 @@ class TickSampler:
         w = self._window
         if w is None or not w.tick_from <= tick < w.tick_end:
             self._window = w = None  # the one before freed first
-            n_ticks = self.job.plan.n_ticks
-            win = self.job.plan.device_window(min(tick, n_ticks), self._window_segments)
-            if win.tick_end <= min(tick, n_ticks):
-                raise RuntimeError(f"tick {tick}: no window of {self._window_segments} segments holds it (a bug)")
-            rows = max(self._window_segments, bucket_size(win.span_last - win.span_first))
-            spans = window_span_arrays(self.job.spans, win.span_first, win.span_last, rows, rows)
-            end = win.tick_end if win.tick_end <= n_ticks else np.iinfo(np.int64).max  # the last: and past the end
-            w = self._window = _Window(tick, end, win.law.fn, win.law.arrays, spans, win.span_first)
+            tick_in = min(tick, self.job.plan.n_ticks)
+            w = self._window = self._upload(tick, self.job.plan.device_window(tick_in, self._window_segments))
         return w
+
+    def _upload(self, tick: int, win: LawWindow) -> _Window:
+        """The window ``win`` (asked for at ``tick``) with the spans under it, on the device."""
+        n_ticks = self.job.plan.n_ticks
+        if win.tick_end <= min(tick, n_ticks):
+            raise RuntimeError(f"tick {tick}: no window of {self._window_segments} segments holds it (a bug)")
+        rows = max(self._window_segments, bucket_size(win.span_last - win.span_first))
+        spans = window_span_arrays(self.job.spans, win.span_first, win.span_last, rows, rows)
+        end = win.tick_end if win.tick_end <= n_ticks else np.iinfo(np.int64).max  # the last: and past the end
+        return _Window(tick, end, win.law.fn, win.law.arrays, spans, win.span_first)
 
     def machine_positions(self, program_p: np.ndarray) -> np.ndarray:
         """Map program x, y, z columns to the machine's axes (undriven axes stay at home)."""
