@@ -58,7 +58,7 @@ from jaxcnc.errors import JaxcncError
 from jaxcnc.format import EventKind, TableFile
 from jaxcnc.machine import MachineConfig
 from jaxcnc.program import PROGRAM_AXES, Kind, Program, program_start
-from jaxcnc.ticks.verify import TableRows, Violation, _runs
+from jaxcnc.ticks.verify import TableRows, Violation, _runs, check_threads, map_chunks
 
 #: Numeric slack added to every tolerance (mm): far above the table's fixed point (2^-32 discrete) and
 #: float rounding, far below any tolerance a program states.
@@ -405,6 +405,12 @@ class ProgramPath:
         self.zone_in = np.where(self.moving, zone(self.prev, idx, self.tol_in), 0.0)
         self.zone_out = np.where(self.moving, zone(idx, self.next, self.tol_out), 0.0)
 
+    def prepare_curves(self) -> None:
+        """Build the distance function of every spline the program has (:meth:`curve` builds them on first use;
+        threads that share this path then only read them)."""
+        for i in np.unique(self.program.curve[self.is_curve]):
+            self.curve(int(i))
+
     def curve(self, i: int) -> CurveDistance:
         """The distance function of spline ``i`` of the program (built once)."""
         if i not in self._curves:
@@ -500,9 +506,12 @@ def path_deviation(
     *,
     slack_mm: float = SLACK_MM,
     chunk_rows: int = CHUNK_ROWS,
+    threads: int | None = None,
 ) -> PathDeviation:
     """Measure every tick's distance from the programmed path of ``program`` and compare it with the
-    tolerance allowed there (module docstring). Streams the table ``chunk_rows`` ticks at a time."""
+    tolerance allowed there (module docstring). Streams the table ``chunk_rows`` ticks at a time, measured on
+    ``threads`` threads (:func:`~jaxcnc.ticks.verify.check_threads` by default); the result depends on
+    neither."""
     h = table.header
     geo = ProgramPath(program, machine.path.corner_tol_mm)
     shaping = h.meta.get("shaping_tol_mm", 0.0)
@@ -516,40 +525,52 @@ def path_deviation(
     n = h.n_rows
     best, worst_tick, away_max, n_away, n_over, max_tol = -1.0, 0, -1.0, 0, 0, 0.0
     pending: list[tuple[int, int, float, float, int]] = []
+    geo.prepare_curves()  # (built once, before the threads share them)
+
+    def chunk(reader: TableRows, s: int) -> tuple:
+        """Ticks ``s .. s + chunk_rows - 1``: their worst distance and its tick, the largest tolerance, the ticks
+        away from corners and their worst distance, the ticks over the tolerance and their runs."""
+        e = min(s + chunk_rows, n)
+        m_pos = reader.exact_mm(s, e)
+        p = np.empty((e - s, 3))
+        for i, c in cols:
+            p[:, c] = m_pos[:, i]
+        for c in fixed:
+            p[:, c] = start[c]
+        ticks = np.arange(s, e)
+        row = ev_row[np.maximum(np.searchsorted(ev_tick, ticks, side="right") - 1, 0)]
+        dist = geo.distance(p, row)  # its own row; the neighbours only where that is not already ~0
+        far = np.flatnonzero(dist > ON_PATH_MM)
+        for other in (geo.prev[row[far]], geo.next[row[far]]):
+            sel = far[other >= 0]
+            dist[sel] = np.minimum(dist[sel], geo.distance(p[sel], other[other >= 0]))
+        tol_row = np.maximum(geo.allowed[row], shaping)
+        allowed = tol_row + slack_mm
+        j = int(np.argmax(dist))
+        z_in, z_out = geo.zone_in[row], geo.zone_out[row]
+        away = ((z_in == 0) | (np.linalg.norm(p - program.start[row], axis=1) > z_in)) & (
+            (z_out == 0) | (np.linalg.norm(p - program.end[row], axis=1) > z_out)
+        )
+        away_n = int(away.sum())
+        over = dist > allowed
+        runs = []
+        for r0, r1 in _runs(over):
+            w = r0 + int(np.argmax(dist[r0 : r1 + 1]))
+            runs.append((s + r0, s + r1, float(dist[w]), float(allowed[w]), int(program.line[row[w]])))
+        worst_away = float(dist[away].max()) if away_n else -1.0
+        return float(dist[j]), s + j, float(tol_row.max()), away_n, worst_away, int(over.sum()), runs
+
     with TableRows(table) as reader:
-        for s in range(0, n, chunk_rows):
-            e = min(s + chunk_rows, n)
-            m_pos = reader.exact_mm(s, e)
-            p = np.empty((e - s, 3))
-            for i, c in cols:
-                p[:, c] = m_pos[:, i]
-            for c in fixed:
-                p[:, c] = start[c]
-            ticks = np.arange(s, e)
-            row = ev_row[np.maximum(np.searchsorted(ev_tick, ticks, side="right") - 1, 0)]
-            dist = geo.distance(p, row)  # its own row; the neighbours only where that is not already ~0
-            far = np.flatnonzero(dist > ON_PATH_MM)
-            for other in (geo.prev[row[far]], geo.next[row[far]]):
-                sel = far[other >= 0]
-                dist[sel] = np.minimum(dist[sel], geo.distance(p[sel], other[other >= 0]))
-            tol_row = np.maximum(geo.allowed[row], shaping)
-            allowed = tol_row + slack_mm
-            max_tol = max(max_tol, float(tol_row.max()))
-            j = int(np.argmax(dist))
-            if dist[j] > best:
-                best, worst_tick = float(dist[j]), s + j
-            z_in, z_out = geo.zone_in[row], geo.zone_out[row]
-            away = ((z_in == 0) | (np.linalg.norm(p - program.start[row], axis=1) > z_in)) & (
-                (z_out == 0) | (np.linalg.norm(p - program.end[row], axis=1) > z_out)
-            )
-            if away.any():
-                n_away += int(away.sum())
-                away_max = max(away_max, float(dist[away].max()))
-            over = dist > allowed
-            n_over += int(over.sum())
-            for r0, r1 in _runs(over):
-                w = r0 + int(np.argmax(dist[r0 : r1 + 1]))
-                pending.append((s + r0, s + r1, float(dist[w]), float(allowed[w]), int(program.line[row[w]])))
+        found = map_chunks(reader, chunk, range(0, n, chunk_rows), check_threads() if threads is None else threads)
+        for c_best, c_tick, c_tol, c_away, c_away_max, c_over, runs in found:  # in chunk order
+            max_tol = max(max_tol, c_tol)
+            if c_best > best:
+                best, worst_tick = c_best, c_tick
+            if c_away:
+                n_away += c_away
+                away_max = max(away_max, c_away_max)
+            n_over += c_over
+            pending += runs
     merged: list[list] = []
     for r0, r1, v, lim, line in pending:  # join runs split by chunk boundaries
         if merged and r0 == merged[-1][1] + 1:
