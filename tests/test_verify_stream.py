@@ -147,6 +147,8 @@ def test_streamed_equals_previous(tmp_path: Path, n: int, chunk_rows: int) -> No
     new = measure_table(table, machine, chunk_rows=chunk_rows)
     _assert_same(new, _previous_measure(table, machine, chunk_rows=chunk_rows))
     _assert_same(new, measure_table(table, machine))  # independent of the chunking
+    for threads in (1, 2, 3):  # and of the threads the chunks are measured on (in chunk order)
+        _assert_same(new, measure_table(table, machine, chunk_rows=chunk_rows, threads=threads))
     if n >= 1000:
         kinds = {(v.axis, v.quantity) for v in new.violations}
         assert {("x", "v"), ("x", "a"), ("x", "j"), ("x", "pos"), ("y", "pos")} <= kinds, kinds

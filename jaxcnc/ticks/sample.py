@@ -11,9 +11,11 @@ position each tick — rounding never accumulates.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import queue
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from functools import partial
-from typing import NamedTuple, Protocol
+from typing import NamedTuple, Protocol, TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -26,6 +28,8 @@ from jaxcnc.geometry.evaluate import evaluate_path, span_arrays, window_span_arr
 from jaxcnc.geometry.spans import pad_spans
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.protocol import LawWindow
+
+T = TypeVar("T")
 
 CHUNK_TICKS = 1 << 16
 
@@ -74,6 +78,52 @@ class ArraySampler:
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         for first in range(0, self.n_rows, self.chunk):
             yield first, self.pos[first : first + self.chunk]
+
+
+def sampled_ahead(chunks: Iterable[T], depth: int = 2) -> Iterator[T]:
+    """The items of ``chunks``, made on a worker thread up to ``depth`` items ahead of the caller.
+
+    The tick stage samples a chunk (XLA, which releases the GIL) while the writer quantises, derives the laser
+    and checksums and writes the chunk before it (NumPy, zlib and file writes, which release it too): on a 2-core
+    machine the two overlap instead of taking turns. The items and their order are those of ``chunks``; an
+    exception raised making one is raised here, in its place. When the caller stops early (an error, Ctrl-C), the
+    worker is told to stop and joined: it finishes at most the chunk it is making.
+    """
+    out: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+    end = object()
+
+    def put(item: tuple) -> bool:
+        while not stop.is_set():
+            try:
+                out.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for item in chunks:
+                if not put((item, None)):
+                    return
+            put((end, None))
+        except BaseException as exc:  # handed to the caller, raised there
+            put((end, exc))
+
+    worker = threading.Thread(target=work, name="jaxcnc-ticks-ahead", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = out.get()
+            if item is end:
+                if exc is not None:
+                    raise exc
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join()
 
 
 def machine_axes(program_p: np.ndarray, axis_source: np.ndarray, home: np.ndarray) -> np.ndarray:

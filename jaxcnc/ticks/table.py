@@ -21,7 +21,7 @@ from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.laser import LatencyShift, power_of_rows, shift_laser_events
 from jaxcnc.ticks.pso import pso_events
-from jaxcnc.ticks.sample import Sampler, TickSampler, machine_axes, quantize
+from jaxcnc.ticks.sample import Sampler, TickSampler, machine_axes, quantize, sampled_ahead
 
 _EVENT_OF = {
     Event.PROGRAM_STOP: EventKind.PROGRAM_STOP,
@@ -163,7 +163,7 @@ def write_samples(
                 flush(shift.push(lit))
             bar.update(p.shape[0])
 
-        for first, p in sampler:
+        for first, p in sampled_ahead(sampler):  # the next chunk sampled while this one is written
             p = np.asarray(p)
             if held is not None:
                 put(*held, p[:1])
