@@ -413,11 +413,14 @@ def _run_stages(
     size: Callable[[Any], tuple[int, float]],
     write: Callable[[Any, Program], Any],
     verify: Callable[[TableFile, Program], Any],
+    keep: Callable[[Any], Any] | None = None,
 ) -> _Run:
     """The way every contour job goes — parse, plan, ticks, verify — as timed stages under one progress bar:
     the source read with ``options``; ``plan(program)``; the table's size (``size(planned)``: rows, seconds)
     held to ``bounds`` before anything is written; ``write(planned, program)`` writes ``out``;
-    ``verify(table, program)`` checks it."""
+    ``verify(table, program)`` checks it. ``keep(planned)``: what the caller needs of the plan once the table is
+    written (:attr:`_Run.planned`), made before the checks so that the plan is freed under them (they read the
+    table and the program alone: a 1 M-block contour's spans and time law, ~1 GB, are not held twice as long)."""
     from jaxcnc.format import TableFile
 
     st = Stages(progress, label)
@@ -433,6 +436,8 @@ def _run_stages(
             release_free_heap()  # what planning freed, before the tick stage's windows
         with st.stage("ticks"):
             write(planned, program)
+        if keep is not None:
+            planned = keep(planned)
         if n_rows >= TRIM_ROWS:
             release_free_heap()  # the tick stage's windows, before the checks build theirs
         with st.stage("verify"):
@@ -588,6 +593,12 @@ def plan_program_file(
         size=lambda job: (job.plan.n_ticks + 1, job.plan.total_time_s),
         write=lambda job, _: write_table(job, out, progress=progress, planner=planner, source_options=options),
         verify=lambda table, program: (measure_table(table, machine), path_deviation(table, machine, program)),
+        keep=lambda job: {  # what the report needs of the job: the job itself is freed before the checks
+            "total_time_s": job.plan.total_time_s,
+            "n_spans": len(job.spans),
+            "n_ticks": job.plan.n_ticks + 1,
+            "path_length_mm": job.path_length_mm,
+        },
     )  # fmt: skip
     job, program, table, (meas, path) = run.planned, run.program, run.table, run.checked
     return {
@@ -595,12 +606,12 @@ def plan_program_file(
         "machine": machine.name,
         "table": str(out),
         "planner": planner,
-        "total_time_s": job.plan.total_time_s,
+        "total_time_s": job["total_time_s"],
         "n_blocks": program.n_blocks,
-        "n_spans": len(job.spans),
-        "n_ticks": job.plan.n_ticks + 1,
+        "n_spans": job["n_spans"],
+        "n_ticks": job["n_ticks"],
         "tick_hz": machine.tick_hz,
-        "path_length_mm": job.path_length_mm,
+        "path_length_mm": job["path_length_mm"],
         "plan_wall_s": run.plan_wall_s,
         "timings_s": run.seconds,
         **measured(meas),
