@@ -140,6 +140,19 @@ def test_where_segments_lie_is_derived_from_the_counts_and_equals_the_stored_col
     _same_plan(stored, derived)
     monkeypatch.setattr(topp._SegmentTable, "_derivable", lambda self, grid, commit: False)
     _same_plan(plan_job(prog, m).plan, derived)  # stored from the first window
+    # the plan keeps them derived: 8 columns stored, not 14 (v1 with v0 as the nodes' speeds, the ramps' accelerations
+    # and where the segments lie made where they are read)
+    assert sorted(derived.columns) == sorted(
+        ("v_nodes", "vp", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
+    )
+    assert derived.cuts is not None and sorted(stored.columns) != sorted(derived.columns)
+    n = len(derived)
+    for k0, k1 in ((0, 1), (5, 17), (n // 3, n // 2), (n - 3, n), (0, n)):
+        rows = derived.rows(k0, k1)
+        for f in PLAN_FIELDS:  # any window of rows is the same bits as the whole column's slice
+            np.testing.assert_array_equal(rows[f], getattr(stored, f)[k0:k1], err_msg=f"{f} {k0}:{k1}")
+    spans = np.arange(int(derived.span[-1]) + 1)
+    np.testing.assert_array_equal(derived.span_first_segment(spans.size), stored.span_first_segment(spans.size))
 
 
 def test_grid_rows_are_the_grids_rows_in_any_block_of_spans():
@@ -225,7 +238,7 @@ def test_ramp_accelerations_are_derived_and_equal_the_stored_columns(monkeypatch
 
 def test_ramp_accel_is_the_trapezoids_division_bit_for_bit():
     from jaxcnc.planners.motion import trapezoids
-    from jaxcnc.planners.topp import _ramp_accel
+    from jaxcnc.planners.timelaw import ramp_accel as _ramp_accel
 
     rng = np.random.default_rng(5)
     n = 5000

@@ -65,7 +65,7 @@ from jaxcnc.planners.phaseplane import (
 )
 from jaxcnc.planners.protocol import Planner, PlanRequest
 from jaxcnc.planners.registry import register_planner
-from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs, trapezoids
+from jaxcnc.planners.timelaw import Plan, SegmentCuts, align_to_ticks, ramp_accel, trapezoids
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -934,20 +934,21 @@ class _SegmentTable:
     ``capacity`` rows are allocated up front (the grid's interval count: every interval is a segment), so
     the windows' outputs are freed window by window instead of being kept as pieces and joined at the end;
     refinement that cuts more intervals grows the arrays. :meth:`plan` aligns them to ticks over the
-    whole program; the plan keeps views of the first ``n`` rows. Two columns and three are not stored while
-    they can be derived, bit for bit, from what is kept anyway (checked on every window):
+    whole program; the plan keeps views of the first ``n`` rows, and what is derived here stays derived in the
+    :class:`~.timelaw.Plan` (its storage). Five columns are not stored while they can be derived, bit for bit,
+    from what is kept anyway (checked on every window):
 
     * a segment ends at the speed the next one starts at (the same node), so ``v1`` is a view of the ``v0``
-      column shifted by one — kept apart only if some window's values ever differ in a bit;
+      column shifted by one (the plan's ``v_nodes``) — kept apart only if some window's values ever differ in a bit;
     * where a segment lies (``span``, ``s_start``, ``length``) follows from the spans' lengths and the
       final ``counts`` (the windows cut span ``k`` into ``counts[k]`` equal intervals, :func:`_grid_rows`), so
-      given ``span_length`` and ``counts`` (the array refinement updates in place) those three columns are
-      made by :meth:`plan` — 48 MB less at the peak of a 2 M-segment plan — and stored only from the first
-      window whose grid differs in a bit (never seen);
+      given ``span_length`` and ``counts`` (the array refinement updates in place) the plan gets them as
+      :class:`~.timelaw.SegmentCuts` — stored only from the first window whose grid differs in a bit (never seen);
     * in the same large plans, the ramps' accelerations ``a_acc``, ``a_dec`` are what :func:`trapezoids` makes
-      of the speeds and times kept anyway (:func:`_ramp_accel`), so :meth:`plan` makes them after the tick
-      alignment — 84 MB less at the windows' end and at the alignment of a 5 M-segment plan — and they are
+      of the speeds and times kept anyway (:func:`~.timelaw.ramp_accel`), made by the plan where they are read —
       stored only from the first window where that differs in a bit (never seen).
+
+    A 1 M-block blended contour's plan (5.2 M segments): 8 columns kept instead of 14, 579 -> 331 MB.
     """
 
     _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {"rest": True, "length": 0.0, "span": 0, "s_start": 0.0}
@@ -1023,15 +1024,15 @@ class _SegmentTable:
         return self.cols["v0"][1 : n + 1] if self.v1 is None else self.v1[:n]
 
     def _accel(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """``a_acc, a_dec`` of the first ``n`` segments from their speeds and times (:func:`_ramp_accel`)."""
+        """``a_acc, a_dec`` of the first ``n`` segments from their speeds and times (:func:`~.timelaw.ramp_accel`)."""
         cols, v1 = self.cols, self._v1(n)
-        return tuple(_ramp_accel(cols["vp"][:n], v[:n], cols[t][:n]) for v, t in ((cols["v0"], "t_acc"), (v1, "t_dec")))
+        return tuple(ramp_accel(cols["vp"][:n], v[:n], cols[t][:n]) for v, t in ((cols["v0"], "t_acc"), (v1, "t_dec")))
 
     @staticmethod
     def _accel_derivable(out: dict[str, np.ndarray], commit: int) -> bool:
-        """The window's first ``commit`` ramp accelerations are :func:`_ramp_accel` of its speeds and times."""
+        """The window's first ``commit`` ramp accelerations are :func:`~.timelaw.ramp_accel` of its speeds and times."""
         return all(
-            _same_bits(_ramp_accel(out["vp"][:commit], out[v][:commit], out[t][:commit]), out[k][:commit])
+            _same_bits(ramp_accel(out["vp"][:commit], out[v][:commit], out[t][:commit]), out[k][:commit])
             for k, v, t in (("a_acc", "v0", "t_acc"), ("a_dec", "v1", "t_dec"))
         )
 
@@ -1044,19 +1045,10 @@ class _SegmentTable:
         self.derived_accel = False
 
     def _where(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``length, span, s_start`` of the first ``n`` segments (derived mode), made span block by span block
-        into arrays of ``n`` rows (the temporaries stay small)."""
-        length, span, s_start = np.empty(n), np.empty(n, np.int64), np.empty(n)
-        ends = np.cumsum(self.counts[: self.next_span])
-        row, first = 0, 0
-        while first < self.next_span:
-            last = min(self.next_span, first + _WHERE_BLOCK)
-            k = int(ends[last - 1]) - row
-            span[row : row + k], s_start[row : row + k], length[row : row + k] = _grid_rows(
-                self.span_length, self.counts, first, last
-            )
-            row, first = row + k, last
-        return length[:n], span[:n], s_start[:n]
+        """``length, span, s_start`` of the first ``n`` segments (derived mode), as :class:`~.timelaw.SegmentCuts`
+        makes them."""
+        span, s_start, length = SegmentCuts.of(self.span_length, self.counts).rows(0, n)
+        return length, span, s_start
 
     def append(self, out: dict[str, np.ndarray], grid: Grid, commit: int) -> None:
         """The first ``commit`` intervals' segments (trapezoids and where they lie)."""
@@ -1092,7 +1084,8 @@ class _SegmentTable:
     def plan(self, tick_hz: float) -> Plan:
         """One :class:`Plan` of the segments, aligned to ticks over the whole program (padded to the bucket
         of their count, as the compiled alignment expects). The tick alignment reads the segments' durations
-        alone: only those (and where the motion rests) are handed to the compiled program."""
+        alone: only those (and where the motion rests) are handed to the compiled program. The plan keeps the
+        columns as stored here: what is derived here stays derived there (:class:`~.timelaw.Plan`'s storage)."""
         n = self.n
         mb = bucket_size(n)
         self._reserve(mb)
@@ -1102,30 +1095,14 @@ class _SegmentTable:
         times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
         out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
         del times
-        out.update({k: cols[k][:n] for k in _SEGMENT_KEYS if k in cols})
-        out["v1"] = self._v1(n)
-        if self.derived_accel:  # made in the memory the alignment's working arrays left
-            out["a_acc"], out["a_dec"] = self._accel(n)
-        length, span, s_start = self._where(n) if self.derived else (cols[k][:n] for k in self._WHERE)
-        return plan_from_outputs(out, length, span, s_start, tick_hz)
-
-
-#: Spans per block when :meth:`_SegmentTable.plan` makes where the segments lie.
-_WHERE_BLOCK = 1 << 16
-#: Segments per block of :func:`_ramp_accel` (its temporaries stay small).
-_ACCEL_BLOCK = 1 << 18
-
-
-def _ramp_accel(vp: np.ndarray, v: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``(n,)`` a ramp's acceleration ``(vp - v) / t`` (0 where ``t`` is not positive), as :func:`trapezoids`
-    computes ``a_acc`` (``v = v0``, ``t = t_acc``) and ``a_dec`` (``v1``, ``t_dec``): the same operations, bit for
-    bit (:class:`_SegmentTable` checks every window). In blocks of :data:`_ACCEL_BLOCK` rows."""
-    out = np.empty(vp.shape[0])
-    for a in range(0, vp.shape[0], _ACCEL_BLOCK):
-        b = slice(a, a + _ACCEL_BLOCK)
-        ok = t[b] > 0
-        out[b] = np.where(ok, (vp[b] - v[b]) / np.where(ok, t[b], 1.0), 0.0)
-    return out
+        columns = {k: np.asarray(out[k][:n]) for k in ("group_tick", "offset_ticks", "first_tick")}
+        columns.update({k: cols[k][:n] for k in _SEGMENT_KEYS + self._WHERE if k in cols and k != "v0"})
+        if self.v1 is None:
+            columns["v_nodes"] = cols["v0"][: n + 1]
+        else:
+            columns["v0"], columns["v1"] = cols["v0"][:n], self.v1[:n]
+        cuts = SegmentCuts.of(self.span_length, self.counts) if self.derived else None
+        return Plan(columns, int(out["n_ticks"]), tick_hz, cuts)
 
 
 def _grid_rows(span_length: np.ndarray, counts: np.ndarray, first: int, last: int) -> tuple[np.ndarray, ...]:
