@@ -25,6 +25,7 @@ from jaxcnc.geometry import build_spans
 from jaxcnc.machine import load_machine, parse_machine
 from jaxcnc.planners import plan_job, program_start
 from jaxcnc.planners.grid import AXIS_FIELDS, GridPiece, build_grid, interval_counts, join_pieces
+from jaxcnc.planners.timelaw import PLAN_COLUMNS
 
 PEERS = Path(__file__).resolve().parents[1] / ".." / "shared" / "peers"
 GRID_FIELDS = ("span", "s_start", "delta", "curved", "boxed", *AXIS_FIELDS)
@@ -32,9 +33,8 @@ GRID_FIELDS = ("span", "s_start", "delta", "curved", "boxed", *AXIS_FIELDS)
 
 def _plan_arrays(plan) -> dict[str, bytes]:
     """Every array of a Plan, as bytes (bit for bit: ``-0.0`` is not ``0.0``, NaN is itself)."""
-    out = {k: v.tobytes() + str(v.shape).encode() for k, v in vars(plan).items() if isinstance(v, np.ndarray)}
-    assert {"v0", "vp", "t_acc", "first_tick", "span", "s_start"} <= out.keys()
-    return out
+    out = {k: np.ascontiguousarray(getattr(plan, k)) for k in PLAN_COLUMNS}
+    return {k: v.tobytes() + str(v.shape).encode() for k, v in out.items()}
 
 
 def _count_joins(monkeypatch) -> list[int]:

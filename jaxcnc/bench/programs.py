@@ -123,3 +123,20 @@ def cam_polyline(n_blocks: int, seed: int = 0, arc_every: int = 50) -> Program:
         blend_tol=np.full(n_blocks, np.inf),
         line=k + 1,
     )
+
+
+def cam_gcode(n_blocks: int, seed: int = 0) -> str:
+    """:func:`cam_polyline` as an RS274 program (G17, mm, absolute; lines G1, arcs G2/G3 with I J from the start;
+    F6000 = 100 mm/s; ``G64`` without P: the machine's corner tolerance), coordinates to the micrometre's
+    thousandth — what a post processor writes for it (``jaxcnc plan`` reads it as a user's file)."""
+    prog = cam_polyline(n_blocks, seed)
+    start, end = prog.start, prog.end
+    lines = ["G21 G90 G17 G64", f"G0 X{start[0, 0]:.6f} Y{start[0, 1]:.6f}", "F6000"]
+    arc = prog.kind == Kind.ARC
+    ij = np.where(arc[:, None], prog.center - start, 0.0)
+    word = np.where(arc, np.where(prog.turn > 0, "G3", "G2"), "G1")
+    for k in range(len(prog)):
+        xy = f"{word[k]} X{end[k, 0]:.6f} Y{end[k, 1]:.6f}"
+        lines.append(xy + (f" I{ij[k, 0]:.6f} J{ij[k, 1]:.6f}" if arc[k] else ""))
+    lines.append("M2")
+    return "\n".join(lines) + "\n"
