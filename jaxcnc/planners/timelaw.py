@@ -255,20 +255,9 @@ class Plan(TimeLaw):
         return arrays
 
 
-#: The per-segment outputs of :func:`trapezoids` + :func:`align_to_ticks` that a :class:`Plan` keeps.
-_PROFILE_KEYS = (
-    "v0",
-    "vp",
-    "v1",
-    "a_acc",
-    "a_dec",
-    "t_acc",
-    "t_cru",
-    "t_dec",
-    "group_tick",
-    "offset_ticks",
-    "first_tick",
-)
+#: The per-segment outputs of :func:`trapezoids` + :func:`align_to_ticks` that a :class:`Plan` keeps (every column
+#: but where the segments lie).
+_PROFILE_KEYS = tuple(k for k in PLAN_COLUMNS if k not in ("length", "span", "s_start"))
 
 
 def plan_from_outputs(out: dict, length: np.ndarray, span: np.ndarray, s_start: np.ndarray, tick_hz: float) -> Plan:
