@@ -153,6 +153,13 @@ def test_where_segments_lie_is_derived_from_the_counts_and_equals_the_stored_col
             np.testing.assert_array_equal(rows[f], getattr(stored, f)[k0:k1], err_msg=f"{f} {k0}:{k1}")
     spans = np.arange(int(derived.span[-1]) + 1)
     np.testing.assert_array_equal(derived.span_first_segment(spans.size), stored.span_first_segment(spans.size))
+    for tick in (0, derived.n_ticks // 3, derived.n_ticks):  # the tick stage's windows: the same spans and rows
+        a, b = derived.device_window(tick, 64), stored.device_window(tick, 64)
+        assert (a.span_first, a.span_last, a.tick_end) == (b.span_first, b.span_last, b.tick_end)
+        k0 = max(int(np.searchsorted(stored.first_tick, tick, side="right")) - 1, 0)
+        assert (a.span_first, a.span_last) == (int(stored.span[k0]), int(stored.span[min(k0 + 64, n) - 1]) + 1)
+        for k, v in a.law.arrays.items():
+            np.testing.assert_array_equal(np.asarray(v), np.asarray(b.law.arrays[k]), err_msg=f"{k} at {tick}")
 
 
 def test_grid_rows_are_the_grids_rows_in_any_block_of_spans():

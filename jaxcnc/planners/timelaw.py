@@ -212,16 +212,15 @@ class Plan(TimeLaw):
 
     def ticks_at(self, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
         """The tick nearest to where segment ``seg`` has covered ``s`` mm (the trapezoid inverted exactly)."""
-        k = np.asarray(seg)
-        v0, v1 = self.column("v0")[k], self.column("v1")[k]
-        vp, t_acc, t_cru, t_dec = (self.column(c)[k] for c in ("vp", "t_acc", "t_cru", "t_dec"))
-        a_acc = ramp_accel(vp, v0, t_acc) if "a_acc" not in self.columns else self.columns["a_acc"][k]
-        a_dec = ramp_accel(vp, v1, t_dec) if "a_dec" not in self.columns else self.columns["a_dec"][k]
-        tau = trapezoid_time_at(v0, vp, a_acc, a_dec, t_acc, t_cru, t_dec, s)
+        k = seg
+        tau = trapezoid_time_at(
+            self.v0[k], self.vp[k], self.a_acc[k], self.a_dec[k], self.t_acc[k], self.t_cru[k], self.t_dec[k], s
+        )
         return np.rint(self.group_tick[k] + self.offset_ticks[k] + tau * self.tick_hz).astype(np.int64)
 
     def _span_at(self, k: int) -> int:
-        return int(self.cuts.span_of(k)) if self.cuts is not None and "span" not in self.columns else int(self.span[k])
+        """The span segment ``k`` lies on (without making the whole column where it is derived)."""
+        return int(self.column("span", k, k + 1)[0])
 
     def device_law(self) -> DeviceLaw:
         """The segments padded to a bucket (padding never found: first tick ``int64 max``) and :func:`plan_span_s`."""
