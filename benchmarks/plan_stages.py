@@ -7,8 +7,8 @@ the interior check) with ``time.process_time`` and prints the split of the repea
 Stages nest: ``build_spans`` includes ``blend_path``, which includes the four after it, ``build_grid`` includes
 ``boxes_at`` (``_boxes_into`` from b938340 on) and ``frames_at``; ``_solve_grid`` waits for the solve's compiled
 programs. Windows without blends (``--corner-tol-mm 0``) take ``_plain_window`` instead of ``build_grid``,
-``_solve_grid`` and ``interior_excess``. Works on any revision that has these functions
-(``PYTHONPATH=<checkout>`` for another).
+``_solve_grid`` and the interior check (``grid_excess`` from this issue's compiled check on, ``interior_excess``
+before it). Works on any revision that has these functions (``PYTHONPATH=<checkout>`` for another).
 """
 
 from __future__ import annotations
@@ -41,6 +41,8 @@ STAGES = (
     (grid, "frames_at"),
     (topp, "_solve_grid"),
     (topp, "interior_excess"),
+    (topp, "grid_excess"),
+    (topp, "device_spans"),
     (topp, "_compact_device_spans"),
     (topp, "_plain_window"),
 )

@@ -83,7 +83,7 @@ def test_small_windows_that_grow_and_refine_plan_the_same(monkeypatch):
     program = parse_gcode("G21 G90\nG0 X0 Y0\nF6000\nG64 P0.01\n" + moves + "M2\n", "<arcs>", start=start, home=start)
     spans = build_spans(program, 0.01)
     step = spans.length / interval_counts(spans)  # before any refinement
-    check, refined = topp.interior_excess, []
+    check, refined = topp.grid_excess, []
 
     def failing_once(arrays, grid, *args, **kwargs):
         bad = check(arrays, grid, *args, **kwargs)
@@ -91,7 +91,7 @@ def test_small_windows_that_grow_and_refine_plan_the_same(monkeypatch):
         refined.append(int(once.sum()))
         return bad | once
 
-    monkeypatch.setattr(topp, "interior_excess", failing_once)
+    monkeypatch.setattr(topp, "grid_excess", failing_once)
     alone, overlapped, joined = _with_and_without(monkeypatch, program, machine, 64)
     assert any(g is None for g in joined) and sum(g is not None for g in joined) > 10  # grown windows, joined ones
     assert sum(refined) > 20

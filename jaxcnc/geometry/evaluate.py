@@ -59,11 +59,13 @@ def span_arrays(spans, xp: ModuleType = np) -> dict:
     }
 
 
-def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int) -> dict:
+def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int | tuple[int, int]) -> dict:
     """:func:`span_arrays` (JAX) of spans ``first..last-1`` alone, row ``k`` being span ``first + k``: the spans padded
     to ``rows`` with points, their arc and poly rows (``item`` renumbered) padded to ``table_rows`` each (0: the path
-    has none of that kind) — the values of ``span_arrays(pad_spans(pad_tables(slice_spans(...))))``, built in
-    place in column layout (the tick stage uploads one such window of a long job at a time)."""
+    has none of that kind), or to ``(arc rows, poly rows)`` — the values of
+    ``span_arrays(pad_spans(pad_tables(slice_spans(...))))``, built in place in column layout, without the copies
+    of every span field those make (the tick stage uploads one such window of a long job at a time, the planner's
+    grid one per window: :func:`~jaxcnc.planners.grid.device_spans`)."""
     import jax
 
     from jaxcnc.geometry.spans import pad_table_rows
@@ -100,11 +102,14 @@ def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int)
     }
     arcs, polys = spans.arcs, spans.polys
     arc_pad, poly_pad = pad_table_rows(polys.coeffs.shape[1:])
+    if isinstance(table_rows, tuple):
+        n_arc_rows, n_poly_rows = table_rows
+    else:
+        n_arc_rows, n_poly_rows = (table_rows if len(arcs) else 0), (table_rows if len(polys) else 0)
     for name in ("center", "e1", "e2", "axis", "radius", "rise"):
-        arrays[f"arc_{name}"] = col(getattr(arcs, name), arc_rows, table_rows if len(arcs) else 0, arc_pad[name])
-    q = table_rows if len(polys) else 0
-    arrays["poly_coeffs"] = col(polys.coeffs, poly_rows, q, poly_pad["coeffs"])
-    arrays["poly_timing"] = col(polys.timing, poly_rows, q, poly_pad["timing"])
+        arrays[f"arc_{name}"] = col(getattr(arcs, name), arc_rows, n_arc_rows, arc_pad[name])
+    arrays["poly_coeffs"] = col(polys.coeffs, poly_rows, n_poly_rows, poly_pad["coeffs"])
+    arrays["poly_timing"] = col(polys.timing, poly_rows, n_poly_rows, poly_pad["timing"])
     return {k: jax.device_put(v) for k, v in arrays.items()}
 
 

@@ -33,9 +33,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxcnc.buckets import bucket_size
-from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
-from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
-from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, slice_spans
+from jaxcnc.geometry.evaluate import evaluate_path, window_span_arrays
+from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
+from jaxcnc.geometry.spans import Spans
 from jaxcnc.jaxconfig import on_cpu  # (and float64)
 
 MAX_TURN_RAD = 0.0175  # 1°
@@ -136,9 +136,11 @@ def device_spans(spans: Spans, first: int = 0, last: int | None = None) -> dict[
     ``first + k``): only those spans and the arc and poly rows they use, each table padded to a bucket, so
     that a window of a long program uploads its own rows alone and the compiled kernels see few sizes."""
     last = len(spans) if last is None else last
-    sub = spans if (first, last) == (0, len(spans)) else slice_spans(spans, first, last)
-    sub = pad_tables(sub, *(bucket_size(len(t)) if len(t) else 0 for t in (sub.arcs, sub.polys)))
-    return span_arrays(pad_spans(sub, bucket_size(len(sub))), xp=jnp)
+    kind, item = spans.kind[first:last], spans.item[first:last]
+    n_arcs = int(np.count_nonzero((kind == SpanKind.ARC) & (item >= 0)))
+    n_polys = int(np.count_nonzero(np.isin(kind, POLY_KINDS) & (item >= 0)))
+    tables = tuple(bucket_size(k) if k else 0 for k in (n_arcs, n_polys))
+    return window_span_arrays(spans, first, last, bucket_size(last - first), tables)
 
 
 def frames_at(

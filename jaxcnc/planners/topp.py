@@ -457,6 +457,59 @@ def interior_excess(
     return bad
 
 
+def grid_excess(
+    arrays: dict,
+    grid: Grid,
+    out: dict[str, np.ndarray],
+    a_max: np.ndarray,
+    axes: tuple[int, ...],
+    first: int = 0,
+    only: str | None = None,
+) -> np.ndarray:
+    """``(m,)`` :func:`interior_excess` of a window's grid as :func:`_solve_grid` planned it (``out``: its
+    ``x_node`` and ``share``), by compiled programs: the frames at the midpoints of the curved intervals without
+    a box (:func:`_frame_columns`, their cosines and sines apart on arcs), then the check on the moving ``axes``
+    (:func:`_excess`, reading the ends' frames from the grid's axis-major storage in place). The same values as
+    :func:`interior_excess`, which evaluates it in NumPy (tested against it); measured on the 100k-block contour
+    (98k arc intervals among 400k boxed ones): 26-34 -> 6-8 ms a plan."""
+    m = len(grid)
+    idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
+    bad = np.zeros(m, bool)
+    if idx.size == 0:
+        return bad
+    if grid.axis_major is None:  # (a grid made without the axis-major storage)
+        acc = np.minimum(np.asarray(a_max), BIG)[None, :] * out["share"][:m, None]
+        return interior_excess(arrays, grid, out["x_node"][: m + 1], acc, first, only)
+    q = idx.size
+    qb = bucket_size(q)
+    which, where = aligned_array(qb, np.int64), aligned_array(qb)
+    which[:q], which[q:] = grid.span[idx] - first, 0
+    where[:q], where[q:] = grid.s_start[idx] + grid.delta[idx] / 2, 0.0
+    trig = _arc_trig(arrays, which, where) if only == "arc" else None
+    mid = _frame_columns(arrays, which, where, only, trig)
+    at = _pad_aligned(idx, qb, 0)
+    rows = {
+        "x_a": _pad_aligned(out["x_node"][idx], qb, 0.0),
+        "x_b": _pad_aligned(out["x_node"][idx + 1], qb, 0.0),
+        "delta": _pad_aligned(grid.delta[idx], qb, 0.0),  # 0 on the padding rows: not checked
+        "share": _pad_aligned(out["share"][idx], qb, 1.0),
+    }
+    ends = {f: grid.axis_major[f] for f in ("t_a", "k_a", "t_b", "k_b")}
+    bad[idx] = np.asarray(_grid_excess(ends, at, mid, rows, np.asarray(a_max), axes))[:q]
+    return bad
+
+
+@partial(jax.jit, static_argnames=("axes",))
+def _grid_excess(ends: dict, at: jnp.ndarray, mid: tuple, rows: dict, a_max, axes: tuple[int, ...]) -> jnp.ndarray:
+    """The check of :func:`grid_excess`: ``ends`` the grid's ``t_a, k_a, t_b, k_b`` ``(3, mb)``, ``at`` ``(q,)`` the
+    checked intervals' columns, ``mid`` :func:`_frame_columns`' six ``(q,)`` columns at their midpoints, ``rows``
+    their ``x_a``, ``x_b``, ``delta``, ``share`` ``(q,)``."""
+    t_m, k_m = jnp.stack(mid[:3]), jnp.stack(mid[3:6])
+    frame = (ends["t_a"][:, at], ends["k_a"][:, at], t_m, k_m, ends["t_b"][:, at], ends["k_b"][:, at])
+    delta = rows["delta"]
+    return _excess(frame, rows["x_a"], rows["x_b"], delta, delta > 0, a_max, rows["share"], axes)
+
+
 def plan_topp(req: PlanRequest) -> Plan:
     """Plan with exact per-axis coupling on a fine grid (see the module docstring).
 
@@ -694,9 +747,8 @@ def _solve_refined(
             else:
                 grid, grid0 = grid0, None  # (a refinement builds it again)
             out = _solve_grid(req, facts, grid, x_start)
-            acc = np.minimum(np.asarray(req.a_max), BIG)[None, :] * out["share"][: len(grid), None]
             arcs = np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC)
-            bad = interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, at, "arc" if arcs else None)
+            bad = grid_excess(arrays, grid, out, req.a_max, facts.axes, at, "arc" if arcs else None)
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
