@@ -470,8 +470,9 @@ def grid_excess(
     ``x_node`` and ``share``), by compiled programs: the frames at the midpoints of the curved intervals without
     a box (:func:`_frame_columns`, their cosines and sines apart on arcs), then the check on the moving ``axes``
     (:func:`_excess`, reading the ends' frames from the grid's axis-major storage in place). The same values as
-    :func:`interior_excess`, which evaluates it in NumPy (tested against it); measured on the 100k-block contour
-    (98k arc intervals among 400k boxed ones): 26-34 -> 6-8 ms a plan."""
+    :func:`interior_excess`, which evaluates it in NumPy (tested against it). On the 100k-block contour (98k arc
+    intervals beside 400k boxed ones; ``benchmarks/plan_stages.py``, two interleaved runs against the NumPy check):
+    35-39 -> 19-25 ms CPU a plan."""
     m = len(grid)
     idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
     bad = np.zeros(m, bool)
