@@ -86,7 +86,7 @@ def test_the_compiled_interior_check_flags_what_the_numpy_check_flags():
 
 
 def test_frames_from_the_separate_trig_program_are_the_same_bits():
-    """``_frame_columns`` given ``_arc_trig``'s cosines and sines (one evaluation per point) returns what it
+    """``frame_columns`` given ``arc_trig_columns``'s cosines and sines (one evaluation per point) returns what it
     returns computing them itself, bit for bit, on the arcs of a CAM contour."""
     spans = build_spans(cam_polyline(5000), 0.0)
     rows = np.flatnonzero(spans.kind == SpanKind.ARC)
@@ -94,9 +94,9 @@ def test_frames_from_the_separate_trig_program_are_the_same_bits():
     rng = np.random.default_rng(3)
     which = rng.integers(0, rows.size, 4096)
     where = rng.uniform(-0.1, 1.1, 4096) * spans.length[rows][which]  # clipped inside, both ways
-    trig = topp._arc_trig(arrays, which, where)
-    got = [np.asarray(c) for c in topp._frame_columns(arrays, which, where, "arc", trig)]
-    alone = [np.asarray(c) for c in topp._frame_columns(arrays, which, where, "arc")]
+    trig = topp.arc_trig_columns(arrays, which, where)
+    got = [np.asarray(c) for c in topp.frame_columns(arrays, which, where, "arc", trig)]
+    alone = [np.asarray(c) for c in topp.frame_columns(arrays, which, where, "arc")]
     _, t, k = evaluate_path(arrays, jnp.asarray(which), jnp.asarray(where), 2, xp=jnp, only="arc")
     for a, b, c in zip(got, alone, [*np.asarray(t).T, *np.asarray(k).T], strict=True):
         assert np.array_equal(a.view(np.int64), b.view(np.int64))

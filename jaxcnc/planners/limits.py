@@ -115,6 +115,20 @@ def chord_speed(kappa: jnp.ndarray, chord_tol_mm: float, tick_hz: float) -> jnp.
     return jnp.where(bent, dtheta / k_safe * tick_hz, jnp.inf)
 
 
+def curvature_columns(t: tuple, k: tuple) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """``(|q'|, |q'|`` or 1 where 0, the curvature ``|q' × q''| / |q'|³)`` from columns ``t``, ``k`` (``(m,)`` each)."""
+    speed = jnp.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+    safe = jnp.where(speed > 0, speed, 1.0)
+    cross = (t[1] * k[2] - t[2] * k[1], t[2] * k[0] - t[0] * k[2], t[0] * k[1] - t[1] * k[0])
+    return speed, safe, jnp.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2) / safe**3
+
+
+def node_chord_speed(t: tuple, k: tuple, chord_tol_mm, tick_hz) -> jnp.ndarray:
+    """``(m,)`` :func:`chord_speed` at nodes with ``q' = t``, ``q'' = k`` (columns), as
+    :func:`~jaxcnc.planners.topp.speed_cap` computes it (``inf`` where the curvature is 0: on every line)."""
+    return chord_speed(curvature_columns(t, k)[2], chord_tol_mm, tick_hz)
+
+
 def is_corner(tangent_out_prev: jnp.ndarray, tangent_in: jnp.ndarray) -> jnp.ndarray:
     """``(m,)`` bool: the junction turns by more than ``CORNER_ANGLE_RAD`` (exact stop)."""
     chord = jnp.linalg.norm(tangent_in - tangent_out_prev, axis=1)

@@ -34,7 +34,7 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.blend_kernel import cpu_loop_options
-from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, span_arrays
+from jaxcnc.geometry.evaluate import span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
 from jaxcnc.memory import release_free_heap
@@ -43,15 +43,17 @@ from jaxcnc.planners.grid import (
     Grid,
     GridPiece,
     aligned_array,
+    arc_trig_columns,
     build_grid,
     cut_spans,
     device_spans,
+    frame_columns,
     frames_at,
     interval_counts,
     is_curved,
     join_pieces,
 )
-from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, junctions
+from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, curvature_columns, junctions
 from jaxcnc.planners.lookahead_planner import plan_lookahead
 from jaxcnc.planners.phaseplane import (
     backward_pieces,
@@ -85,27 +87,13 @@ def speed_cap(
 
     ``t``, ``k``: one ``(m,)`` column per axis (x, y, z); ``v_max``: per axis, each a scalar or ``(m,)``.
     The tool moves at ``|q'| ṡ``, axis ``i`` at ``|q'_i| ṡ``; the curvature is ``|q' × q''| / |q'|³``.
-    ``v_chord``: :func:`node_chord_speed` of ``t``, ``k`` where a program before computed it (else here).
+    ``v_chord``: :func:`~.limits.node_chord_speed` of ``t``, ``k`` where a program before computed it (else here).
     """
     x_axis = _axis_speed_cap(tuple(jnp.abs(c) for c in t), v_max)
-    speed, safe, kappa = _curvature(t, k)
+    speed, safe, kappa = curvature_columns(t, k)
     v_chord = chord_speed(kappa, chord_tol_mm, tick_hz) if v_chord is None else v_chord
     v_tool = jnp.minimum(feed, v_chord)  # the tool's own speed caps
     return jnp.minimum(x_axis, jnp.where(speed > 0, (v_tool / safe) ** 2, jnp.inf))
-
-
-def _curvature(t: tuple, k: tuple) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
-    """``(|q'|, |q'|`` or 1 where 0, the curvature ``|q' × q''| / |q'|³)`` from columns ``t``, ``k`` (``(m,)`` each)."""
-    speed = jnp.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
-    safe = jnp.where(speed > 0, speed, 1.0)
-    cross = (t[1] * k[2] - t[2] * k[1], t[2] * k[0] - t[0] * k[2], t[0] * k[1] - t[1] * k[0])
-    return speed, safe, jnp.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2) / safe**3
-
-
-def node_chord_speed(t: tuple, k: tuple, chord_tol_mm, tick_hz) -> jnp.ndarray:
-    """``(m,)`` :func:`~jaxcnc.planners.limits.chord_speed` at nodes with ``q' = t``, ``q'' = k`` (columns), as
-    :func:`speed_cap` computes it (``inf`` where the curvature is 0: on every line)."""
-    return chord_speed(_curvature(t, k)[2], chord_tol_mm, tick_hz)
 
 
 def _axis_speed_cap(t_abs: tuple, v_max: tuple) -> jnp.ndarray:
@@ -291,29 +279,6 @@ def _excess(frame: tuple, xa, xb, delta, on, a_max, share, axes) -> jnp.ndarray:
     return on & bad
 
 
-@partial(jax.jit, static_argnames=("only",))
-def _frame_columns(
-    arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None, trig: tuple | None = None, chord=None
-) -> tuple[jnp.ndarray, ...]:
-    """``q'`` and ``q''`` at ``s`` along spans ``span`` ``(q,)`` (:func:`~.grid.path_frame`) as six ``(q,)``
-    columns (x, y, z of each): separate outputs of one fused loop (a transposed ``(3, q)`` output would make XLA
-    evaluate the frame once per row). ``trig``: :func:`_arc_trig` of the same points where all are on arcs.
-    ``chord``: ``(chord_tol_mm, tick_hz)`` to append :func:`node_chord_speed` at the points as a seventh column
-    (its arc sine costs more than the rest of an interval's caps: once per curved node here, instead of at both
-    ends of every interval)."""
-    _, t, k = evaluate_path(arrays, span, s, 2, xp=jnp, only=only, trig=trig)
-    cols = tuple(t[:, i] for i in range(3)) + tuple(k[:, i] for i in range(3))
-    return cols if chord is None else cols + (node_chord_speed(cols[:3], cols[3:], *chord),)
-
-
-@jax.jit
-def _arc_trig(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """:func:`~jaxcnc.geometry.evaluate.arc_trig` ``(q,)`` as a program of its own: :func:`_frame_columns`' six
-    output loops read the angles' cosines and sines instead of evaluating them six times over (12 → 4 ms CPU
-    for 160k points)."""
-    return arc_trig(arrays, span, s, xp=jnp)
-
-
 def _pad_aligned(a: np.ndarray, n: int, fill) -> np.ndarray:
     """:func:`~jaxcnc.buckets.pad_rows` into an :func:`~jaxcnc.planners.grid.aligned_array` (read in place by a
     compiled program)."""
@@ -468,7 +433,7 @@ def grid_excess(
 ) -> np.ndarray:
     """``(m,)`` :func:`interior_excess` of a window's grid as :func:`_solve_grid` planned it (``out``: its
     ``x_node`` and ``share``), by compiled programs: the frames at the midpoints of the curved intervals without
-    a box (:func:`_frame_columns`, their cosines and sines apart on arcs), then the check on the moving ``axes``
+    a box (:func:`frame_columns`, their cosines and sines apart on arcs), then the check on the moving ``axes``
     (:func:`_excess`, reading the ends' frames from the grid's axis-major storage in place). The same values as
     :func:`interior_excess`, which evaluates it in NumPy (tested against it). On the 100k-block contour (98k arc
     intervals beside 400k boxed ones; ``benchmarks/plan_stages.py``, two interleaved runs against the NumPy check):
@@ -486,8 +451,8 @@ def grid_excess(
     which, where = aligned_array(qb, np.int64), aligned_array(qb)
     which[:q], which[q:] = grid.span[idx] - first, 0
     where[:q], where[q:] = grid.s_start[idx] + grid.delta[idx] / 2, 0.0
-    trig = _arc_trig(arrays, which, where) if only == "arc" else None
-    mid = _frame_columns(arrays, which, where, only, trig)
+    trig = arc_trig_columns(arrays, which, where) if only == "arc" else None
+    mid = frame_columns(arrays, which, where, only, trig)
     at = _pad_aligned(idx, qb, 0)
     rows = {
         "x_a": _pad_aligned(out["x_node"][idx], qb, 0.0),
@@ -503,7 +468,7 @@ def grid_excess(
 @partial(jax.jit, static_argnames=("axes",))
 def _grid_excess(ends: dict, at: jnp.ndarray, mid: tuple, rows: dict, a_max, axes: tuple[int, ...]) -> jnp.ndarray:
     """The check of :func:`grid_excess`: ``ends`` the grid's ``t_a, k_a, t_b, k_b`` ``(3, mb)``, ``at`` ``(q,)`` the
-    checked intervals' columns, ``mid`` :func:`_frame_columns`' six ``(q,)`` columns at their midpoints, ``rows``
+    checked intervals' columns, ``mid`` :func:`frame_columns`' six ``(q,)`` columns at their midpoints, ``rows``
     their ``x_a``, ``x_b``, ``delta``, ``share`` ``(q,)``."""
     t_m, k_m = jnp.stack(mid[:3]), jnp.stack(mid[3:6])
     frame = (ends["t_a"][:, at], ends["k_a"][:, at], t_m, k_m, ends["t_b"][:, at], ends["k_b"][:, at])
@@ -790,8 +755,8 @@ def _plain_window(
     the same values, bit for bit, made by compiled programs from the window's span arrays.
 
     The frames are evaluated once per node (an interval's end is the next one's start on the same span: the
-    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call (:func:`_frame_columns`, the
-    arcs' cosines and sines from :func:`_arc_trig`, the chord speed at the nodes with them);
+    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call (:func:`frame_columns`, the
+    arcs' cosines and sines from :func:`arc_trig_columns`, the chord speed at the nodes with them);
     :func:`_plain_inputs` gathers each interval's fields from its span's (or its nodes' frames) into the padded
     axis-major ``(3, mb)`` layout, :func:`_interval_caps` and :func:`_band_pieces` follow, and :func:`_plain_solve`
     runs the passes and the interior check of the curved intervals (on the moving axes), which comes back as
@@ -822,10 +787,10 @@ def _plain_window(
         which[n_c : n_c + n_e], where[n_c : n_c + n_e] = row[ends], s_end[idx[ends]]
         which[n_c + n_e : q], where[n_c + n_e : q] = row, s_start[idx] + delta[idx] / 2
         only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
-        trig = _arc_trig(arrays, which, where) if only == "arc" else None
+        trig = arc_trig_columns(arrays, which, where) if only == "arc" else None
         rank = np.cumsum(curved) - 1  # a curved interval's start node is frame rank[i], its midpoint q - n_c + rank[i]
         chord = (req.machine.path.chord_tol_mm, req.machine.tick_hz)
-        frames = (_frame_columns(arrays, which, where, only, trig, chord), np.array([n_c, n_e]))
+        frames = (frame_columns(arrays, which, where, only, trig, chord), np.array([n_c, n_e]))
     window = {
         "t_in": _pad_columns(spans.tangent_in[first:last], mb),
         "t_out": _pad_columns(spans.tangent_out[first:last], mb),
@@ -914,11 +879,11 @@ def _pad_columns(rows: np.ndarray, n: int) -> np.ndarray:
 def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
     """The grid fields of a window without blends as :func:`plan_grid` reads them (``g``), gathered from the
     window's spans and the nodes' frames — the values the general grid has, bit for bit (moved, not computed),
-    with the chord speeds at the curved nodes (``chord_a``, ``chord_b``: see :func:`_frame_columns`).
+    with the chord speeds at the curved nodes (``chord_a``, ``chord_b``: see :func:`frame_columns`).
 
     ``window``: the window's span fields, ``(mb,)`` or ``(3, mb)`` (``t_in``, ``t_out``), padded after its spans
     with a point at rest; ``iv``: each interval's ``local`` span, ``s_start``, ``delta`` ``(mb,)``; ``frames``:
-    ``None`` (no curved span) or :func:`_frame_columns`' seven columns with ``(n_c, n_e)``, laid out as
+    ``None`` (no curved span) or :func:`frame_columns`' seven columns with ``(n_c, n_e)``, laid out as
     :func:`_plain_window` evaluates them, and then ``iv["rank"]`` (a curved interval's rank among them) and
     ``window["compact"]`` (a curved span's rank); ``holds``: ``None`` or the node caps ``(hold_a, hold_b)``;
     ``scalars``: ``(m, x_start)``.
