@@ -23,6 +23,7 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry import poly
+from jaxcnc.jitcache import cached_jit
 
 #: Points where a blend's parameter speed and maxima are checked (its check points).
 N_CHECK = 9
@@ -74,7 +75,7 @@ def blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray
 @cache
 def _compiled(fn):
     """``fn`` jitted with :func:`cpu_loop_options`."""
-    return jax.jit(fn, compiler_options=cpu_loop_options())
+    return cached_jit(fn, compiler_options=cpu_loop_options())
 
 
 def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray]:

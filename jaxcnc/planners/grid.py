@@ -26,9 +26,8 @@ the same motion at any tick rate.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial, reduce
+from functools import reduce
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -37,6 +36,7 @@ from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, window_span_arrays
 from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
 from jaxcnc.geometry.spans import Spans
 from jaxcnc.jaxconfig import on_cpu  # (and float64)
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.limits import node_chord_speed
 
 MAX_TURN_RAD = 0.0175  # 1°
@@ -123,7 +123,7 @@ def interval_counts(spans: Spans) -> np.ndarray:
     return n.astype(np.int64)
 
 
-@partial(jax.jit, static_argnames=("order", "only"))
+@cached_jit(static_argnames=("order", "only"))
 def path_frame(
     arrays: dict, span: jnp.ndarray, s: jnp.ndarray, order: int = 2, only: str | None = None
 ) -> tuple[jnp.ndarray, ...]:
@@ -160,7 +160,7 @@ def frames_at(
     return tuple(np.asarray(d)[:q] for d in path_frame(arrays, which, where, order, only))
 
 
-@partial(jax.jit, static_argnames=("only",))
+@cached_jit(static_argnames=("only",))
 def frame_columns(
     arrays: dict, span: jnp.ndarray, s: jnp.ndarray, only: str | None, trig: tuple | None = None, chord=None
 ) -> tuple[jnp.ndarray, ...]:
@@ -175,7 +175,7 @@ def frame_columns(
     return cols if chord is None else cols + (node_chord_speed(cols[:3], cols[3:], *chord),)
 
 
-@jax.jit
+@cached_jit
 def arc_trig_columns(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
     """:func:`~jaxcnc.geometry.evaluate.arc_trig` ``(q,)`` as a program of its own: :func:`frame_columns`' six
     output loops read the angles' cosines and sines instead of evaluating them six times over (12 → 4 ms CPU
@@ -188,7 +188,7 @@ def arc_trig_columns(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[j
 BOX_CHUNK = 8192
 
 
-@jax.jit
+@cached_jit
 def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray) -> tuple[jnp.ndarray, ...]:
     """Ends and boxes of ``q'`` and ``q''`` on intervals ``[s0, s0 + delta]`` of polynomial spans (``(m,)``
     each; returns eight ``(m, 3)`` arrays as :func:`boxes_at`).

@@ -16,6 +16,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.limits import junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.motion import trapezoids
@@ -27,7 +28,7 @@ from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs
 MOVING_MM = 1e-12
 
 
-@jax.jit
+@cached_jit
 def plan_arrays(
     kind,
     length,

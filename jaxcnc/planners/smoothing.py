@@ -32,7 +32,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass
-from functools import cached_property, partial
+from functools import cached_property
 
 import jax
 import jax.numpy as jnp
@@ -44,6 +44,7 @@ from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import pad_spans
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.motion import trapezoid_integral
 from jaxcnc.planners.protocol import DeviceLaw, Planner, PlanRequest, TimeLaw, machine_limits, with_margin
 from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
@@ -211,7 +212,7 @@ class SmoothLaw:
         return span, s - span_s0[span]
 
 
-@partial(jax.jit, static_argnames=("window_ticks", "tick_hz"))
+@cached_jit(static_argnames=("window_ticks", "tick_hz"))
 def s_of_ticks(plan: dict, ticks: jnp.ndarray, window_ticks: int, tick_hz: float) -> jnp.ndarray:
     """Averaged path length ``s_W`` at integer ``ticks`` ``(m,)``: ``(A(t) - A(t - W)) / W`` in its group."""
     g = jnp.clip(jnp.searchsorted(plan["g_new_start"], ticks, side="right") - 1, 0, plan["g_new_start"].shape[0] - 1)
@@ -272,7 +273,7 @@ def span_starts(spans) -> tuple[dict, jnp.ndarray]:
     return span_arrays(padded, xp=jnp), jax.device_put(span_s0)
 
 
-@jax.jit
+@cached_jit
 def positions_at_s(spans: dict, span_s0: jnp.ndarray, s: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Program-axis positions ``(m, 3)`` at path lengths ``s`` ``(m,)`` from the program start, and their span."""
     span = jnp.clip(jnp.searchsorted(span_s0, s, side="right") - 1, 0, span_s0.shape[0] - 1)

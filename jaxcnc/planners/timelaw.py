@@ -16,7 +16,6 @@ tick plus a float offset (in ticks) inside the group, so an hour at 100 kHz lose
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -24,6 +23,7 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.motion import trapezoid_position, trapezoid_speed, trapezoid_time_at, trapezoids
 from jaxcnc.planners.protocol import GROUP_END_TOL_TICKS, DeviceLaw, LawWindow, TimeLaw
 
@@ -352,7 +352,7 @@ def sample_plan(plan: Plan, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return tuple(np.asarray(a) for a in out)
 
 
-@partial(jax.jit, static_argnames=("tick_hz",))
+@cached_jit(static_argnames=("tick_hz",))
 def _sample(arrays: dict, length: jnp.ndarray, t: jnp.ndarray, tick_hz: float):
     seg = segment_of_tick(arrays["first_tick"], t)
     s_local = s_at(arrays, length, seg, t, tick_hz)

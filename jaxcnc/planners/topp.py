@@ -24,7 +24,7 @@ import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
-from functools import cache, partial
+from functools import cache
 
 import jax
 import jax.numpy as jnp
@@ -37,6 +37,7 @@ from jaxcnc.geometry.blend_kernel import cpu_loop_options
 from jaxcnc.geometry.evaluate import span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
@@ -179,7 +180,7 @@ def plan_grid(
     return _band_solve(pieces, laws, x_start)
 
 
-@partial(jax.jit, static_argnames=("axes",))
+@cached_jit(static_argnames=("axes",))
 def _plan_lines(g: dict, v_max, a_max, chord_tol, tick_hz, x_start, axes: tuple[int, ...], j_max) -> dict:
     """:func:`plan_grid` of a window without curved intervals: the look-ahead scans, one program."""
     c = _interval_rows(g, v_max, a_max, chord_tol, tick_hz, axes, j_max)
@@ -189,7 +190,7 @@ def _plan_lines(g: dict, v_max, a_max, chord_tol, tick_hz, x_start, axes: tuple[
     return out
 
 
-@partial(jax.jit, static_argnames=("axes",))
+@cached_jit(static_argnames=("axes",))
 def _band_pieces(
     g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max, caps: dict | None = None
 ) -> tuple[dict, dict]:
@@ -219,7 +220,7 @@ def _box_pieces(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...]
     return pieces, laws
 
 
-@partial(jax.jit, static_argnames=("axes", "part"))
+@cached_jit(static_argnames=("axes", "part"))
 def _box_part(g: dict, caps: dict | None, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...], j_max, part: str):
     """One program of :func:`_box_pieces`: ``part`` ``"caps"`` (:func:`_interval_caps`), ``"static"``
     (:func:`~.phaseplane.static_cap`), ``"backward"`` / ``"forward"`` (the pieces) or ``"laws"``
@@ -239,7 +240,7 @@ def _box_part(g: dict, caps: dict | None, v_max, a_max, chord_tol, tick_hz, axes
     return laws
 
 
-@jax.jit
+@cached_jit
 def _band_solve(pieces: dict, laws: dict, x_start, check: dict | None = None) -> dict:
     """The second program of a curved window: the backward and forward scans, then the trapezoids;
     with ``check`` (:func:`_interior_bad`'s frames and ``a_max``) also each interval's ``bad``."""
@@ -381,10 +382,10 @@ def _junction_facts(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz):
 def _junction_program():
     """:func:`~jaxcnc.planners.limits.junctions` jitted with :func:`~jaxcnc.geometry.blend_kernel.cpu_loop_options`
     (made on first use: the options are probed by a compile)."""
-    return jax.jit(junctions, compiler_options=cpu_loop_options())
+    return cached_jit(junctions, compiler_options=cpu_loop_options())
 
 
-@jax.jit
+@cached_jit
 def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
     """:func:`~jaxcnc.planners.timelaw.align_to_ticks`, returning only what it adds to the segments."""
     out = align_to_ticks(prof, rest_start, tick_hz)
@@ -465,7 +466,7 @@ def grid_excess(
     return bad
 
 
-@partial(jax.jit, static_argnames=("axes",))
+@cached_jit(static_argnames=("axes",))
 def _grid_excess(ends: dict, at: jnp.ndarray, mid: tuple, rows: dict, a_max, axes: tuple[int, ...]) -> jnp.ndarray:
     """The check of :func:`grid_excess`: ``ends`` the grid's ``t_a, k_a, t_b, k_b`` ``(3, mb)``, ``at`` ``(q,)`` the
     checked intervals' columns, ``mid`` :func:`frame_columns`' six ``(q,)`` columns at their midpoints, ``rows``
@@ -840,7 +841,7 @@ def _plain_window(
     return grid, out
 
 
-@partial(jax.jit, static_argnames=("axes",))
+@cached_jit(static_argnames=("axes",))
 def _plain_solve(pieces: dict, laws: dict, x_start, frames, check: dict, axes: tuple[int, ...]) -> dict:
     """:func:`_band_solve` of a window without blends, the interior check on its curved intervals alone
     (``bad_curved`` ``(ncb,)``, in their order): read from the nodes' frames as :func:`_plain_window` evaluates
@@ -864,7 +865,7 @@ def _curved_excess(x_node, laws: dict, frames, check: dict, axes: tuple[int, ...
     return _excess(frame, x_node[idx], x_node[idx + 1], delta, on, check["a_max"], share, axes)
 
 
-_caps = jax.jit(_interval_caps)
+_caps = cached_jit(_interval_caps)
 
 
 def _pad_columns(rows: np.ndarray, n: int) -> np.ndarray:
@@ -875,7 +876,7 @@ def _pad_columns(rows: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-@jax.jit
+@cached_jit
 def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
     """The grid fields of a window without blends as :func:`plan_grid` reads them (``g``), gathered from the
     window's spans and the nodes' frames — the values the general grid has, bit for bit (moved, not computed),

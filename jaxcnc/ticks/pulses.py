@@ -9,7 +9,6 @@ before idle ones).
 from __future__ import annotations
 
 from collections.abc import Iterator
-from functools import partial
 from pathlib import Path
 
 import jax
@@ -19,6 +18,7 @@ import numpy as np
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.format import EVENT_DTYPE, EventKind
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.pulsed import PlannedPoints
 from jaxcnc.planners.pulsed.trajectory import Trajectory
 from jaxcnc.program import PROGRAM_AXES
@@ -26,7 +26,7 @@ from jaxcnc.ticks.sample import CHUNK_TICKS, machine_axes
 from jaxcnc.ticks.table import table_meta, write_samples
 
 
-@partial(jax.jit, static_argnames=("chunk",))
+@cached_jit(static_argnames=("chunk",))
 def _trajectory_chunk(first, n_last, start_tick, coeffs, tick_hz, chunk: int):
     """Positions ``(chunk, 3)`` of ticks ``first + i``: piece search, then Horner in local seconds."""
     tick = jnp.minimum(first + jnp.arange(chunk, dtype=jnp.int64), n_last)

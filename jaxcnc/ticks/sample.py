@@ -14,10 +14,8 @@ from __future__ import annotations
 import queue
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from functools import partial
 from typing import NamedTuple, Protocol, TypeVar
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -26,6 +24,7 @@ from jaxcnc.buckets import bucket_size
 from jaxcnc.format import FINE_SCALE
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays, window_span_arrays
 from jaxcnc.geometry.spans import pad_spans
+from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.job import PlannedJob
 from jaxcnc.planners.protocol import LawWindow
 
@@ -34,7 +33,7 @@ T = TypeVar("T")
 CHUNK_TICKS = 1 << 16
 
 
-@partial(jax.jit, static_argnames=("chunk", "law_fn"))
+@cached_jit(static_argnames=("chunk", "law_fn"))
 def _positions_chunk(
     first: jnp.ndarray, n_last: jnp.ndarray, law_fn, law: dict, spans: dict, chunk: int
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
@@ -46,7 +45,7 @@ def _positions_chunk(
     return p, span
 
 
-@jax.jit
+@cached_jit
 def quantize(p_mm: jnp.ndarray, discrete_mm: float) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Integer discretes ``round(p / q)`` and the residual in 2^-32 discretes (both int32)."""
     x = p_mm / discrete_mm

@@ -1,0 +1,254 @@
+"""Compiled programs that a fresh process loads instead of tracing them again: :func:`cached_jit`.
+
+``jax.jit`` traces a Python function and lowers it to StableHLO in every new process, before its persistent
+compile cache can hand back the executable: on a 2000-block program ``jaxcnc plan`` spent ~0.8 s tracing and
+~0.5 s lowering its 14 programs, with every executable already on disk. A function made with :func:`cached_jit`
+behaves as ``jax.jit`` of it, and where the compile cache is on (:func:`~jaxcnc.jaxconfig.configure_jax`, as the
+command line does) it also keeps each traced program, as ``jax.export`` serialises it, next to the executables
+(``<cache>/exports``): a later process with the same arguments' shapes deserialises the program and only
+compiles it, which the compile cache answers.
+
+A stored program is used only where everything that made it is the same (the key of its file):
+
+* the function (module and qualified name), its static arguments (``repr``) and the tree, shapes, dtypes and
+  weak types of the others;
+* JAX and jaxlib, float64 on or off, the platform it runs on;
+* every jaxcnc source file's bytes, and every jaxcnc module's simple globals (numbers, strings, tuples, arrays)
+  and functions' code as they are in this process when the program is made: a constant or a function replaced
+  at run time (a test's monkeypatch) makes other programs, never reads a stored one made without it.
+
+Programs from other source versions are removed when a new version writes its first (the newest
+``KEEP_VERSIONS`` kept). Set ``JAXCNC_EXPORT_CACHE=0`` to trace as ``jax.jit`` does. Anything ``jax.export``
+cannot store (or a damaged file) falls back to ``jax.jit``, with the same results.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import inspect
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import types
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+#: Source versions whose stored programs are kept in the cache directory.
+KEEP_VERSIONS = 3
+#: Where stored programs go when set (a test's temporary directory); ``None``: beside the compile cache.
+DIRECTORY: Path | None = None
+_LOCK = threading.RLock()
+
+
+def cached_jit(
+    fun: Callable | None = None,
+    *,
+    static_argnames: tuple[str, ...] = (),
+    compiler_options: dict[str, str] | None = None,
+):
+    """``jax.jit(fun, static_argnames=..., compiler_options=...)`` whose traced programs are kept on disk with the
+    compile cache (module docstring). Usable as a decorator, with or without arguments."""
+    if fun is None:
+        return functools.partial(cached_jit, static_argnames=static_argnames, compiler_options=compiler_options)
+    return _CachedJit(fun, tuple(static_argnames), compiler_options)
+
+
+def export_dir() -> Path | None:
+    """Where stored programs go: :data:`DIRECTORY` where set, else ``exports`` in the compile cache's directory, or
+    ``None`` (no compile cache, or ``JAXCNC_EXPORT_CACHE=0``)."""
+    if os.environ.get("JAXCNC_EXPORT_CACHE", "1") == "0":
+        return None
+    if DIRECTORY is not None:
+        return DIRECTORY
+    root = jax.config.jax_compilation_cache_dir
+    return Path(root) / "exports" if root else None
+
+
+class _CachedJit:
+    """The callable :func:`cached_jit` returns."""
+
+    def __init__(self, fun: Callable, static: tuple[str, ...], compiler_options: dict[str, str] | None) -> None:
+        self.fun, self.static, self.options = fun, static, compiler_options
+        self.jitted = jax.jit(fun, static_argnames=static or None, compiler_options=compiler_options)
+        self.signature = inspect.signature(fun)
+        self.calls: dict[tuple, Callable | None] = {}  # key -> the stored program's call (None: jax.jit's)
+        functools.update_wrapper(self, fun)
+
+    def __get__(self, obj, objtype=None):  # (a method: bind like a function)
+        return self if obj is None else types.MethodType(self, obj)
+
+    def __call__(self, *args, **kwargs):
+        root = export_dir()
+        if root is None:
+            return self.jitted(*args, **kwargs)
+        bound = self.signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        static = {k: bound.arguments[k] for k in self.static}
+        names = [k for k in self.signature.parameters if k not in self.static]
+        dynamic = [bound.arguments[k] for k in names]
+        leaves, tree = jax.tree.flatten(dynamic)
+        statics = tuple((k, _static_key(v)) for k, v in sorted(static.items()))
+        if any(v is None for _, v in statics):  # a static argument that cannot be named across processes
+            return self.jitted(*args, **kwargs)
+        key = (repr(statics), str(tree), tuple(_aval_key(x) for x in leaves))
+        with _LOCK:
+            call = self.calls.get(key, False)
+            if call is False:
+                call = self.calls[key] = self._load_or_export(root, key, static, names, dynamic)
+        if call is None:
+            return self.jitted(*args, **kwargs)
+        return call(*dynamic)
+
+    def _load_or_export(self, root: Path, key: tuple, static: dict, names: list[str], dynamic: list):
+        """The stored program's call for ``key``: read from ``root``, else traced, exported and written there;
+        ``None`` where ``jax.export`` cannot store it."""
+        from jax import export
+
+        platform = _platform()
+        made = (key, _environment(platform), _globals_fingerprint(self.fun.__module__))
+        digest = hashlib.sha256(repr(made).encode()).hexdigest()
+        folder = root / _source_fingerprint()
+        path = folder / f"{self.fun.__module__}.{self.fun.__qualname__}-{digest[:32]}.exported"
+        exported = None
+        try:
+            exported = export.deserialize(bytearray(path.read_bytes()))
+        except FileNotFoundError:
+            pass
+        except Exception:  # a damaged or foreign file: made again below
+            exported = None
+        if exported is None:
+            fun = self.fun
+
+            def bound(*values):
+                return fun(**dict(zip(names, values, strict=True)), **static)
+
+            try:
+                data = export.export(jax.jit(bound), platforms=[platform])(*dynamic).serialize()
+                _write(folder, path, data)
+                # called as a later process calls it (serialising drops weak types from the results, and the
+                # programs after it must see the same arguments either way)
+                exported = export.deserialize(bytearray(data))
+            except Exception:  # not exportable (or the directory not writable): plain jax.jit
+                return None
+        return jax.jit(exported.call, compiler_options=self.options)
+
+
+def _static_key(value: Any) -> str | None:
+    """A static argument as it names the program in every process: its ``repr``, or for a jaxcnc module's own
+    function (no closure) its module, name and code; ``None`` for other callables (a closure, a plug-in's function:
+    what they read is not in the key)."""
+    if not callable(value):
+        return repr(value)
+    code = getattr(value, "__code__", None)
+    module = getattr(value, "__module__", "") or ""
+    qualname = getattr(value, "__qualname__", "")
+    if code is None or value.__closure__ or "<" in qualname or not module.startswith("jaxcnc"):
+        return None
+    return f"{module}.{qualname}:{hashlib.sha256(_code_bytes(code)).hexdigest()[:16]}"
+
+
+def _aval_key(x: Any) -> tuple:
+    """Shape, dtype and weak type of a leaf (what a traced program depends on)."""
+    aval = jax.typeof(x)
+    return (tuple(aval.shape), str(aval.dtype), bool(getattr(aval, "weak_type", False)))
+
+
+def _platform() -> str:
+    """The platform the program runs on: the default device's (a planning scope), else the default backend's."""
+    device = jax.config.jax_default_device
+    if device is None:
+        return jax.default_backend()
+    return device if isinstance(device, str) else device.platform
+
+
+def _environment(platform: str) -> tuple:
+    import jaxlib
+
+    return (jax.__version__, jaxlib.__version__, bool(jax.config.jax_enable_x64), platform)
+
+
+@functools.cache
+def _source_fingerprint() -> str:
+    """A hash of every jaxcnc source file (their bytes, in path order)."""
+    package = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        h.update(str(path.relative_to(package)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:24]
+
+
+def _globals_fingerprint(module: str) -> str:
+    """A hash of the jaxcnc modules' (and ``module``'s) simple globals and functions' code as they are now (see the
+    module docstring)."""
+    h = hashlib.sha256()
+    names = {m for m in list(sys.modules) if m == "jaxcnc" or m.startswith("jaxcnc.")} | {module}
+    for name in sorted(names):
+        module = sys.modules.get(name)
+        if module is None:
+            continue
+        for attr, value in sorted(vars(module).items(), key=lambda kv: kv[0]):
+            part = _value_key(value)
+            if part is not None:
+                h.update(f"{name}.{attr}=".encode())
+                h.update(part)
+    return h.hexdigest()
+
+
+def _value_key(value: Any) -> bytes | None:
+    """Bytes that change when ``value`` (a module global) does, for the values a trace may read."""
+    if isinstance(value, bool | int | float | complex | str | bytes | type(None)):
+        return repr(value).encode()
+    if isinstance(value, tuple | frozenset) and all(isinstance(v, bool | int | float | str) for v in value):
+        return _const_bytes(value)
+    if isinstance(value, np.ndarray) and value.size <= 1 << 16:
+        return str(value.dtype).encode() + repr(value.shape).encode() + value.tobytes()
+    code = getattr(getattr(value, "__wrapped__", value), "__code__", None)
+    if code is not None:
+        return _code_bytes(code)
+    return None
+
+
+def _code_bytes(code: types.CodeType) -> bytes:
+    """A function's bytecode and constants, nested functions' included (no addresses: the same in every process)."""
+    return b"\0".join([code.co_code, *(_const_bytes(c) for c in code.co_consts)])
+
+
+def _const_bytes(const: Any) -> bytes:
+    """A code object's constant as bytes that are the same in every process (sets sorted: their order follows the
+    process's string hashing; nested code objects by their own bytes)."""
+    if isinstance(const, types.CodeType):
+        return _code_bytes(const)
+    if isinstance(const, frozenset | set):
+        return b"{" + b",".join(sorted(_const_bytes(c) for c in const)) + b"}"
+    if isinstance(const, tuple):
+        return b"(" + b",".join(_const_bytes(c) for c in const) + b")"
+    return repr(const).encode()
+
+
+def _write(folder: Path, path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically; the first write of a source version removes the oldest others."""
+    fresh = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    os.replace(tmp, path)
+    if fresh:
+        others = sorted((p for p in folder.parent.iterdir() if p.is_dir() and p != folder), key=_mtime, reverse=True)
+        for old in others[KEEP_VERSIONS - 1 :]:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def _mtime(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:
+        return 0.0

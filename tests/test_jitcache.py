@@ -1,0 +1,145 @@
+"""``jaxcnc.jitcache.cached_jit``: the results of ``jax.jit``, programs stored and read back by a later process,
+and never a stored program where something that made it has changed."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcnc.jaxconfig  # noqa: F401  (float64)
+from jaxcnc import jitcache
+from jaxcnc.jitcache import cached_jit
+
+SCALE = 2.0
+
+
+@cached_jit(static_argnames=("power",))
+def _poly(x: jnp.ndarray, c: dict, power: int) -> dict:
+    """A program with a static argument, a dict argument and a dict result, reading a module constant."""
+    return {"y": SCALE * x**power + c["a"], "n": jnp.sum(x)}
+
+
+@pytest.fixture
+def cache_dir(tmp_path, monkeypatch):
+    """Stored programs in a temporary directory, for this test alone."""
+    monkeypatch.setattr(jitcache, "DIRECTORY", tmp_path / "exports")
+    monkeypatch.delenv("JAXCNC_EXPORT_CACHE", raising=False)
+    _poly.calls.clear()
+    yield tmp_path
+    _poly.calls.clear()
+
+
+def _stored(root: Path) -> list[Path]:
+    return sorted((root / "exports").rglob("*.exported"))
+
+
+def test_without_a_cache_directory_it_is_jax_jit(monkeypatch):
+    monkeypatch.setattr(jitcache, "DIRECTORY", None)
+    monkeypatch.setattr(jitcache, "export_dir", lambda: None)
+    _poly.calls.clear()
+    x = np.linspace(0.0, 1.0, 7)
+    out = _poly(x, {"a": 1.0}, power=3)
+    np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_poly.jitted(x, {"a": 1.0}, power=3)["y"]))
+    assert not _poly.calls  # nothing stored nor looked up
+
+
+def test_stored_programs_give_the_same_bits_and_are_read_back(cache_dir):
+    x = np.linspace(-1.0, 2.0, 11)
+    expected = _poly.jitted(x, {"a": 0.5}, power=3)
+    got = _poly(x, {"a": 0.5}, power=3)
+    for k in expected:
+        np.testing.assert_array_equal(np.asarray(got[k]), np.asarray(expected[k]))
+    files = _stored(cache_dir)
+    assert len(files) == 1 and "_poly" in files[0].name
+    _poly(x + 1.0, {"a": 0.25}, power=3)  # the same shapes: no new program
+    assert _stored(cache_dir) == files
+    _poly(x[:5], {"a": 0.25}, power=3)  # another shape
+    _poly(x, {"a": 0.25}, power=2)  # another static argument
+    assert len(_stored(cache_dir)) == 3
+    _poly.calls.clear()  # as a new process: read from the files
+    mtimes = {p: p.stat().st_mtime_ns for p in _stored(cache_dir)}
+    again = _poly(x, {"a": 0.5}, power=3)
+    np.testing.assert_array_equal(np.asarray(again["y"]), np.asarray(expected["y"]))
+    assert {p: p.stat().st_mtime_ns for p in _stored(cache_dir)} == mtimes
+
+
+def test_a_changed_constant_makes_another_program(cache_dir, monkeypatch):
+    x = np.arange(4.0)
+    _poly(x, {"a": 0.0}, power=1)
+    _poly.calls.clear()
+    monkeypatch.setattr(sys.modules[__name__], "SCALE", 3.0)
+    out = _poly(x, {"a": 0.0}, power=1)
+    np.testing.assert_array_equal(np.asarray(out["y"]), 3.0 * x)  # not the stored 2 x
+    assert len(_stored(cache_dir)) == 2
+
+
+def test_a_damaged_file_is_made_again(cache_dir):
+    x = np.arange(3.0)
+    _poly(x, {"a": 1.0}, power=2)
+    (path,) = _stored(cache_dir)
+    path.write_bytes(b"not a program")
+    _poly.calls.clear()
+    np.testing.assert_array_equal(np.asarray(_poly(x, {"a": 1.0}, power=2)["y"]), SCALE * x**2 + 1.0)
+    assert path.read_bytes() != b"not a program"
+
+
+def test_switched_off_by_the_environment(cache_dir, monkeypatch):
+    monkeypatch.setenv("JAXCNC_EXPORT_CACHE", "0")
+    assert jitcache.export_dir() is None
+    _poly(np.arange(3.0), {"a": 1.0}, power=2)
+    assert _stored(cache_dir) == []
+
+
+def test_static_closures_are_not_stored(cache_dir):
+    offset = 5.0
+
+    @cached_jit(static_argnames=("fn",))
+    def apply(x, fn):
+        return fn(x)
+
+    out = apply(np.arange(3.0), fn=lambda v: v + offset)
+    np.testing.assert_array_equal(np.asarray(out), np.arange(3.0) + 5.0)
+    assert _stored(cache_dir) == []
+
+
+def test_a_later_process_plans_from_the_stored_programs(tmp_path):
+    """Two processes plan the same program with one cache directory: the second reads the stored programs (no new
+    file) and writes the same table bytes."""
+    script = textwrap.dedent(
+        """
+        import sys
+        from jaxcnc.jaxconfig import configure_jax
+        configure_jax(sys.argv[1])
+        from jaxcnc.bench.plan import bench_machine
+        from jaxcnc.bench.programs import cam_polyline
+        from jaxcnc.machine import parse_machine
+        from jaxcnc.planners import plan_job
+        job = plan_job(cam_polyline(300), parse_machine(bench_machine(0.01), "<bench>"))
+        import hashlib, numpy as np
+        h = hashlib.sha256()
+        for k in sorted(job.plan.columns):
+            h.update(np.ascontiguousarray(job.plan.column(k)).tobytes())
+        print(h.hexdigest())
+        """
+    )
+    env = dict(os.environ, JAXCNC_EXPORT_CACHE="1")
+    cache = tmp_path / "cache"
+    runs = []
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", script, str(cache)], capture_output=True, text=True, env=env)
+        assert out.returncode == 0, out.stderr[-2000:]
+        runs.append((out.stdout.split()[-1], sorted(p.name for p in (cache / "exports").rglob("*.exported"))))
+    assert runs[0][1] and runs[0] == runs[1]
+    env["JAXCNC_EXPORT_CACHE"] = "0"
+    out = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "plain")], capture_output=True, text=True, env=env
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == runs[0][0]  # the same plan as jax.jit's, bit for bit
