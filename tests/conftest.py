@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 from jaxcnc.machine import MachineConfig, parse_machine
+
+# The suite traces its programs as jax.jit does (tests that run the command line in-process turn the compile cache
+# on): stored programs (jaxcnc.jitcache) are tested on their own, in tests/test_jitcache.py.
+os.environ.setdefault("JAXCNC_EXPORT_CACHE", "0")
 
 REPO = Path(__file__).resolve().parents[1]
 CORPUS = REPO.parent / "shared" / "corpus"

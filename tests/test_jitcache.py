@@ -143,3 +143,26 @@ def test_a_later_process_plans_from_the_stored_programs(tmp_path):
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-1] == runs[0][0]  # the same plan as jax.jit's, bit for bit
+
+
+def test_the_command_line_writes_the_same_table_from_stored_programs(tmp_path):
+    """``jaxcnc plan`` twice with one cache (programs stored, then read), and once without stored programs: the
+    same table bytes."""
+    from jaxcnc.bench.plan import bench_machine
+    from jaxcnc.bench.programs import cam_gcode
+
+    program = tmp_path / "cam.ngc"
+    program.write_text(cam_gcode(400))
+    machine = tmp_path / "machine.toml"
+    machine.write_text(bench_machine(0.01))
+    tables = []
+    for i, export in enumerate(("1", "1", "0")):
+        env = dict(os.environ, JAXCNC_EXPORT_CACHE=export, JAXCNC_CACHE_DIR=str(tmp_path / f"cache{export}"))
+        out_file = tmp_path / f"t{i}.ticks"
+        cmd = [sys.executable, "-m", "jaxcnc.cli.main", "plan", str(program), "-m", str(machine), "-o", str(out_file)]
+        out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        assert out.returncode == 0, out.stderr[-2000:]
+        tables.append(out_file.read_bytes())
+    assert any((tmp_path / "cache1" / "exports").rglob("*.exported"))
+    assert not (tmp_path / "cache0" / "exports").exists()
+    assert tables[0] == tables[1] == tables[2]
