@@ -104,7 +104,12 @@ class _CachedJit:
                 call = self.calls[key] = self._load_or_export(root, key, static, names, dynamic)
         if call is None:
             return self.jitted(*args, **kwargs)
-        return call(*dynamic)
+        try:
+            return call(*dynamic)
+        except Exception:  # (arguments on another device than the program's platform, say): as jax.jit, from now on
+            with _LOCK:
+                self.calls[key] = None
+            return self.jitted(*args, **kwargs)
 
     def _load_or_export(self, root: Path, key: tuple, static: dict, names: list[str], dynamic: list):
         """The stored program's call for ``key``: read from ``root``, else traced, exported and written there;

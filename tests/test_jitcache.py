@@ -166,3 +166,18 @@ def test_the_command_line_writes_the_same_table_from_stored_programs(tmp_path):
     assert any((tmp_path / "cache1" / "exports").rglob("*.exported"))
     assert not (tmp_path / "cache0" / "exports").exists()
     assert tables[0] == tables[1] == tables[2]
+
+
+def test_a_stored_program_that_fails_falls_back_to_jax_jit(cache_dir, monkeypatch):
+    """A stored program whose call raises (arguments on another platform's device, say) is dropped: the call is
+    jax.jit's, with its result (or its error)."""
+    x = np.arange(5.0)
+    _poly(x, {"a": 1.0}, power=2)
+    (key,) = _poly.calls
+
+    def broken(*args):
+        raise RuntimeError("not on this device")
+
+    _poly.calls[key] = broken
+    np.testing.assert_array_equal(np.asarray(_poly(x, {"a": 1.0}, power=2)["y"]), SCALE * x**2 + 1.0)
+    assert _poly.calls[key] is None
