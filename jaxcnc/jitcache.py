@@ -97,7 +97,7 @@ class _CachedJit:
         statics = tuple((k, _static_key(v)) for k, v in sorted(static.items()))
         if any(v is None for _, v in statics):  # a static argument that cannot be named across processes
             return self.jitted(*args, **kwargs)
-        key = (repr(statics), str(tree), tuple(_aval_key(x) for x in leaves))
+        key = (repr(statics), str(tree), tuple(_aval_key(x) for x in leaves), _platform())
         with _LOCK:
             call = self.calls.get(key, False)
             if call is False:
@@ -116,7 +116,7 @@ class _CachedJit:
         ``None`` where ``jax.export`` cannot store it."""
         from jax import export
 
-        platform = _platform()
+        platform = key[-1]
         made = (key, _environment(platform), _globals_fingerprint(self.fun.__module__))
         digest = hashlib.sha256(repr(made).encode()).hexdigest()
         folder = root / _source_fingerprint()
