@@ -311,8 +311,7 @@ def build_grid(
         at_b = np.arange(1, n_c + 1)  # the end node: the next interval's start, or its span's end
         at_b[ends] = n_c + np.arange(ends.size)
         for i in range(3):
-            for f, c, at in (("t_a", i, slice(0, n_c)), ("k_a", 3 + i, slice(0, n_c))):
-                major[f][i, plain] = cols[c][at]
+            major["t_a"][i, plain], major["k_a"][i, plain] = cols[i][:n_c], cols[3 + i][:n_c]
             major["t_b"][i, plain], major["k_b"][i, plain] = cols[i][at_b], cols[3 + i][at_b]
     for f, like in (("t_lo", "t_a"), ("t_hi", "t_a"), ("k_lo", "k_a"), ("k_hi", "k_a")):
         major[f][:, :m] = major[like][:, :m]  # copies of the start's values where there is no box
