@@ -181,3 +181,19 @@ def test_a_stored_program_that_fails_falls_back_to_jax_jit(cache_dir, monkeypatc
     _poly.calls[key] = broken
     np.testing.assert_array_equal(np.asarray(_poly(x, {"a": 1.0}, power=2)["y"]), SCALE * x**2 + 1.0)
     assert _poly.calls[key] is None
+
+
+def test_programs_of_old_source_versions_are_removed(tmp_path):
+    """The first program a new source version writes removes all but the newest ``KEEP_VERSIONS - 1`` others."""
+    root = tmp_path / "exports"
+    for i, name in enumerate(("v0", "v1", "v2", "v3")):
+        folder = root / name
+        folder.mkdir(parents=True)
+        (folder / "p.exported").write_bytes(b"x")
+        os.utime(folder, (1_000_000 + i, 1_000_000 + i))
+    jitcache._write(root / "new", root / "new" / "q.exported", b"program")
+    kept = sorted(p.name for p in root.iterdir())
+    assert kept == ["new", "v2", "v3"]
+    assert (root / "new" / "q.exported").read_bytes() == b"program"
+    jitcache._write(root / "new", root / "new" / "r.exported", b"again")  # the version's later programs keep all
+    assert sorted(p.name for p in root.iterdir()) == ["new", "v2", "v3"]
