@@ -78,11 +78,9 @@ class _CachedJit:
         self.fun, self.static, self.options = fun, static, compiler_options
         self.jitted = jax.jit(fun, static_argnames=static or None, compiler_options=compiler_options)
         self.signature = inspect.signature(fun)
+        self.names = [k for k in self.signature.parameters if k not in static]  # the traced arguments, in order
         self.calls: dict[tuple, Callable | None] = {}  # key -> the stored program's call (None: jax.jit's)
         functools.update_wrapper(self, fun)
-
-    def __get__(self, obj, objtype=None):  # (a method: bind like a function)
-        return self if obj is None else types.MethodType(self, obj)
 
     def __call__(self, *args, **kwargs):
         root = export_dir()
@@ -91,8 +89,7 @@ class _CachedJit:
         bound = self.signature.bind(*args, **kwargs)
         bound.apply_defaults()
         static = {k: bound.arguments[k] for k in self.static}
-        names = [k for k in self.signature.parameters if k not in self.static]
-        dynamic = [bound.arguments[k] for k in names]
+        dynamic = [bound.arguments[k] for k in self.names]
         leaves, tree = jax.tree.flatten(dynamic)
         statics = tuple((k, _static_key(v)) for k, v in sorted(static.items()))
         if any(v is None for _, v in statics):  # a static argument that cannot be named across processes
@@ -101,7 +98,7 @@ class _CachedJit:
         with _LOCK:
             call = self.calls.get(key, False)
             if call is False:
-                call = self.calls[key] = self._load_or_export(root, key, static, names, dynamic)
+                call = self.calls[key] = self._load_or_export(root, key, static, dynamic)
         if call is None:
             return self.jitted(*args, **kwargs)
         try:
@@ -111,7 +108,7 @@ class _CachedJit:
                 self.calls[key] = None
             return self.jitted(*args, **kwargs)
 
-    def _load_or_export(self, root: Path, key: tuple, static: dict, names: list[str], dynamic: list):
+    def _load_or_export(self, root: Path, key: tuple, static: dict, dynamic: list):
         """The stored program's call for ``key``: read from ``root``, else traced, exported and written there;
         ``None`` where ``jax.export`` cannot store it."""
         from jax import export
@@ -129,7 +126,7 @@ class _CachedJit:
         except Exception:  # a damaged or foreign file: made again below
             exported = None
         if exported is None:
-            fun = self.fun
+            fun, names = self.fun, self.names
 
             def bound(*values):
                 return fun(**dict(zip(names, values, strict=True)), **static)

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcnc.planners.grid as grid
 import jaxcnc.planners.topp as topp
 from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline
 from jaxcnc.geometry import build_spans
@@ -94,9 +95,9 @@ def test_frames_from_the_separate_trig_program_are_the_same_bits():
     rng = np.random.default_rng(3)
     which = rng.integers(0, rows.size, 4096)
     where = rng.uniform(-0.1, 1.1, 4096) * spans.length[rows][which]  # clipped inside, both ways
-    trig = topp.arc_trig_columns(arrays, which, where)
-    got = [np.asarray(c) for c in topp.frame_columns(arrays, which, where, "arc", trig)]
-    alone = [np.asarray(c) for c in topp.frame_columns(arrays, which, where, "arc")]
+    trig = grid.arc_trig_columns(arrays, which, where)
+    got = [np.asarray(c) for c in grid.frame_columns(arrays, which, where, "arc", trig)]
+    alone = [np.asarray(c) for c in grid.frame_columns(arrays, which, where, "arc")]
     _, t, k = evaluate_path(arrays, jnp.asarray(which), jnp.asarray(where), 2, xp=jnp, only="arc")
     for a, b, c in zip(got, alone, [*np.asarray(t).T, *np.asarray(k).T], strict=True):
         assert np.array_equal(a.view(np.int64), b.view(np.int64))

@@ -25,6 +25,7 @@ from types import ModuleType
 
 import numpy as np
 
+from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry.kinds import POLY_KINDS, SpanKind
 
 
@@ -59,13 +60,13 @@ def span_arrays(spans, xp: ModuleType = np) -> dict:
     }
 
 
-def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int | tuple[int, int]) -> dict:
+def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int | None) -> dict:
     """:func:`span_arrays` (JAX) of spans ``first..last-1`` alone, row ``k`` being span ``first + k``: the spans padded
     to ``rows`` with points, their arc and poly rows (``item`` renumbered) padded to ``table_rows`` each (0: the path
-    has none of that kind), or to ``(arc rows, poly rows)`` — the values of
-    ``span_arrays(pad_spans(pad_tables(slice_spans(...))))``, built in place in column layout, without the copies
-    of every span field those make (the tick stage uploads one such window of a long job at a time, the planner's
-    grid one per window: :func:`~jaxcnc.planners.grid.device_spans`)."""
+    has none of that kind), or with ``None`` each to the bucket of its own rows (0: the window has none) — the
+    values of ``span_arrays(pad_spans(pad_tables(slice_spans(...))))``, built in place in column layout, without
+    the copies of every span field those make (the tick stage uploads one such window of a long job at a time, the
+    planner's grid one per window: :func:`~jaxcnc.planners.grid.device_spans`)."""
     import jax
 
     from jaxcnc.geometry.spans import pad_table_rows
@@ -102,8 +103,8 @@ def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int 
     }
     arcs, polys = spans.arcs, spans.polys
     arc_pad, poly_pad = pad_table_rows(polys.coeffs.shape[1:])
-    if isinstance(table_rows, tuple):
-        n_arc_rows, n_poly_rows = table_rows
+    if table_rows is None:
+        n_arc_rows, n_poly_rows = (bucket_size(r.size) if r.size else 0 for r in (arc_rows, poly_rows))
     else:
         n_arc_rows, n_poly_rows = (table_rows if len(arcs) else 0), (table_rows if len(polys) else 0)
     for name in ("center", "e1", "e2", "axis", "radius", "rise"):

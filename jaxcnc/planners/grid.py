@@ -33,7 +33,7 @@ import numpy as np
 
 from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, window_span_arrays
-from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
+from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
 from jaxcnc.geometry.spans import Spans
 from jaxcnc.jaxconfig import on_cpu  # (and float64)
 from jaxcnc.jitcache import cached_jit
@@ -137,11 +137,7 @@ def device_spans(spans: Spans, first: int = 0, last: int | None = None) -> dict[
     ``first + k``): only those spans and the arc and poly rows they use, each table padded to a bucket, so
     that a window of a long program uploads its own rows alone and the compiled kernels see few sizes."""
     last = len(spans) if last is None else last
-    kind, item = spans.kind[first:last], spans.item[first:last]
-    n_arcs = int(np.count_nonzero((kind == SpanKind.ARC) & (item >= 0)))
-    n_polys = int(np.count_nonzero(np.isin(kind, POLY_KINDS) & (item >= 0)))
-    tables = tuple(bucket_size(k) if k else 0 for k in (n_arcs, n_polys))
-    return window_span_arrays(spans, first, last, bucket_size(last - first), tables)
+    return window_span_arrays(spans, first, last, bucket_size(last - first), None)
 
 
 def frames_at(
@@ -181,6 +177,19 @@ def arc_trig_columns(arrays: dict, span: jnp.ndarray, s: jnp.ndarray) -> tuple[j
     output loops read the angles' cosines and sines instead of evaluating them six times over (12 → 4 ms CPU
     for 160k points)."""
     return arc_trig(arrays, span, s, xp=jnp)
+
+
+def node_frames(arrays: dict, span: np.ndarray, s: np.ndarray, only: str | None, chord=None) -> tuple:
+    """:func:`frame_columns` at ``q`` points (span ``span``, ``s`` mm along it; NumPy), padded to a bucket in
+    aligned arrays (read in place), the arcs' cosines and sines apart where ``only="arc"``
+    (:func:`arc_trig_columns`): the columns as device arrays of the bucket's length, the first ``q`` rows the
+    points'."""
+    q = span.size
+    which, where = aligned_array(bucket_size(q), np.int64), aligned_array(bucket_size(q))
+    which[:q], where[:q] = span, s
+    which[q:], where[q:] = 0, 0.0
+    trig = arc_trig_columns(arrays, which, where) if only == "arc" else None
+    return frame_columns(arrays, which, where, only, trig, chord)
 
 
 #: Boxed intervals per call of :func:`_boxes` on a CPU: a chunk's intermediates stay in the core's cache (at
@@ -301,13 +310,10 @@ def build_grid(
     if plain.size:  # the frames once per node: an interval's end is the next one's start (the same s, bit for bit)
         only = "arc" if np.all(kind[plain] == SpanKind.ARC) else None
         ends = np.flatnonzero(np.append(span[plain[1:]] != span[plain[:-1]], True))  # each span's last interval
-        n_c, q = plain.size, plain.size + ends.size
-        which, where = aligned_array(bucket_size(q), np.int64), aligned_array(bucket_size(q))
-        which[:n_c], where[:n_c] = local[plain], s_start[plain]
-        which[n_c:q], where[n_c:q] = local[plain[ends]], s_end[plain[ends]]
-        which[q:], where[q:] = 0, 0.0
-        trig = arc_trig_columns(arrays, which, where) if only == "arc" else None
-        cols = [np.asarray(c) for c in frame_columns(arrays, which, where, only, trig)]
+        n_c = plain.size
+        which = np.concatenate([local[plain], local[plain[ends]]])
+        where = np.concatenate([s_start[plain], s_end[plain[ends]]])
+        cols = [np.asarray(c) for c in node_frames(arrays, which, where, only)]
         at_b = np.arange(1, n_c + 1)  # the end node: the next interval's start, or its span's end
         at_b[ends] = n_c + np.arange(ends.size)
         for i in range(3):

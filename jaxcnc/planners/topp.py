@@ -44,15 +44,14 @@ from jaxcnc.planners.grid import (
     Grid,
     GridPiece,
     aligned_array,
-    arc_trig_columns,
     build_grid,
     cut_spans,
     device_spans,
-    frame_columns,
     frames_at,
     interval_counts,
     is_curved,
     join_pieces,
+    node_frames,
 )
 from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, curvature_columns, junctions
 from jaxcnc.planners.lookahead_planner import plan_lookahead
@@ -434,7 +433,7 @@ def grid_excess(
 ) -> np.ndarray:
     """``(m,)`` :func:`interior_excess` of a window's grid as :func:`_solve_grid` planned it (``out``: its
     ``x_node`` and ``share``), by compiled programs: the frames at the midpoints of the curved intervals without
-    a box (:func:`frame_columns`, their cosines and sines apart on arcs), then the check on the moving ``axes``
+    a box (:func:`~.grid.node_frames`, their cosines and sines apart on arcs), then the check on the moving ``axes``
     (:func:`_excess`, reading the ends' frames from the grid's axis-major storage in place). The same values as
     :func:`interior_excess`, which evaluates it in NumPy (tested against it). On the 100k-block contour (98k arc
     intervals beside 400k boxed ones; ``benchmarks/plan_stages.py``, two interleaved runs against the NumPy check):
@@ -444,16 +443,9 @@ def grid_excess(
     bad = np.zeros(m, bool)
     if idx.size == 0:
         return bad
-    if grid.axis_major is None:  # (a grid made without the axis-major storage)
-        acc = np.minimum(np.asarray(a_max), BIG)[None, :] * out["share"][:m, None]
-        return interior_excess(arrays, grid, out["x_node"][: m + 1], acc, first, only)
     q = idx.size
     qb = bucket_size(q)
-    which, where = aligned_array(qb, np.int64), aligned_array(qb)
-    which[:q], which[q:] = grid.span[idx] - first, 0
-    where[:q], where[q:] = grid.s_start[idx] + grid.delta[idx] / 2, 0.0
-    trig = arc_trig_columns(arrays, which, where) if only == "arc" else None
-    mid = frame_columns(arrays, which, where, only, trig)
+    mid = node_frames(arrays, grid.span[idx] - first, grid.s_start[idx] + grid.delta[idx] / 2, only)
     at = _pad_aligned(idx, qb, 0)
     rows = {
         "x_a": _pad_aligned(out["x_node"][idx], qb, 0.0),
@@ -469,7 +461,7 @@ def grid_excess(
 @cached_jit(static_argnames=("axes",))
 def _grid_excess(ends: dict, at: jnp.ndarray, mid: tuple, rows: dict, a_max, axes: tuple[int, ...]) -> jnp.ndarray:
     """The check of :func:`grid_excess`: ``ends`` the grid's ``t_a, k_a, t_b, k_b`` ``(3, mb)``, ``at`` ``(q,)`` the
-    checked intervals' columns, ``mid`` :func:`frame_columns`' six ``(q,)`` columns at their midpoints, ``rows``
+    checked intervals' columns, ``mid`` :func:`~.grid.frame_columns`' six ``(q,)`` columns at their midpoints, ``rows``
     their ``x_a``, ``x_b``, ``delta``, ``share`` ``(q,)``."""
     t_m, k_m = jnp.stack(mid[:3]), jnp.stack(mid[3:6])
     frame = (ends["t_a"][:, at], ends["k_a"][:, at], t_m, k_m, ends["t_b"][:, at], ends["k_b"][:, at])
@@ -756,8 +748,8 @@ def _plain_window(
     the same values, bit for bit, made by compiled programs from the window's span arrays.
 
     The frames are evaluated once per node (an interval's end is the next one's start on the same span: the
-    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call (:func:`frame_columns`, the
-    arcs' cosines and sines from :func:`arc_trig_columns`, the chord speed at the nodes with them);
+    same ``s``, bit for bit) and at the curved intervals' midpoints, in one call (:func:`~.grid.frame_columns`, the
+    arcs' cosines and sines from :func:`~.grid.arc_trig_columns`, the chord speed at the nodes with them);
     :func:`_plain_inputs` gathers each interval's fields from its span's (or its nodes' frames) into the padded
     axis-major ``(3, mb)`` layout, :func:`_interval_caps` and :func:`_band_pieces` follow, and :func:`_plain_solve`
     runs the passes and the interior check of the curved intervals (on the moving axes), which comes back as
@@ -781,17 +773,13 @@ def _plain_window(
         n_c, n_e = idx.size, ends.size
         # nodes: every curved interval's start and each curved span's end; then the midpoints
         q = 2 * n_c + n_e
-        which, where = aligned_array(bucket_size(q), np.int64), aligned_array(bucket_size(q))
-        which[q:], where[q:] = 0, 0.0
         row = compact[local[idx]]
-        which[:n_c], where[:n_c] = row, s_start[idx]
-        which[n_c : n_c + n_e], where[n_c : n_c + n_e] = row[ends], s_end[idx[ends]]
-        which[n_c + n_e : q], where[n_c + n_e : q] = row, s_start[idx] + delta[idx] / 2
+        which = np.concatenate([row, row[ends], row])
+        where = np.concatenate([s_start[idx], s_end[idx[ends]], s_start[idx] + delta[idx] / 2])
         only = "arc" if np.all(spans.kind[first:last][curved_span] == SpanKind.ARC) else None
-        trig = arc_trig_columns(arrays, which, where) if only == "arc" else None
         rank = np.cumsum(curved) - 1  # a curved interval's start node is frame rank[i], its midpoint q - n_c + rank[i]
         chord = (req.machine.path.chord_tol_mm, req.machine.tick_hz)
-        frames = (frame_columns(arrays, which, where, only, trig, chord), np.array([n_c, n_e]))
+        frames = (node_frames(arrays, which, where, only, chord), np.array([n_c, n_e]))
     window = {
         "t_in": _pad_columns(spans.tangent_in[first:last], mb),
         "t_out": _pad_columns(spans.tangent_out[first:last], mb),
@@ -880,11 +868,11 @@ def _pad_columns(rows: np.ndarray, n: int) -> np.ndarray:
 def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
     """The grid fields of a window without blends as :func:`plan_grid` reads them (``g``), gathered from the
     window's spans and the nodes' frames — the values the general grid has, bit for bit (moved, not computed),
-    with the chord speeds at the curved nodes (``chord_a``, ``chord_b``: see :func:`frame_columns`).
+    with the chord speeds at the curved nodes (``chord_a``, ``chord_b``: see :func:`~.grid.frame_columns`).
 
     ``window``: the window's span fields, ``(mb,)`` or ``(3, mb)`` (``t_in``, ``t_out``), padded after its spans
     with a point at rest; ``iv``: each interval's ``local`` span, ``s_start``, ``delta`` ``(mb,)``; ``frames``:
-    ``None`` (no curved span) or :func:`frame_columns`' seven columns with ``(n_c, n_e)``, laid out as
+    ``None`` (no curved span) or :func:`~.grid.frame_columns`' seven columns with ``(n_c, n_e)``, laid out as
     :func:`_plain_window` evaluates them, and then ``iv["rank"]`` (a curved interval's rank among them) and
     ``window["compact"]`` (a curved span's rank); ``holds``: ``None`` or the node caps ``(hold_a, hold_b)``;
     ``scalars``: ``(m, x_start)``.
