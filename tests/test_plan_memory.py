@@ -7,10 +7,14 @@ written into arrays allocated once (and grown), spans are assembled field by fie
 
 from __future__ import annotations
 
+import dataclasses
+
+import jax
 import numpy as np
 import pytest
 
 from jaxcnc.bench.programs import BENCH_MACHINE, cam_polyline
+from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry import SpanKind, build_spans
 from jaxcnc.geometry.spans import SPAN_FIELDS, pad_tables, slice_spans
 from jaxcnc.machine import parse_machine
@@ -140,11 +144,9 @@ def test_where_segments_lie_is_derived_from_the_counts_and_equals_the_stored_col
     _same_plan(stored, derived)
     monkeypatch.setattr(topp._SegmentTable, "_derivable", lambda self, grid, commit: False)
     _same_plan(plan_job(prog, m).plan, derived)  # stored from the first window
-    # the plan keeps them derived: 8 columns stored, not 14 (v1 with v0 as the nodes' speeds, the ramps' accelerations
-    # and where the segments lie made where they are read)
-    assert sorted(derived.columns) == sorted(
-        ("v_nodes", "vp", "t_acc", "t_cru", "t_dec", "group_tick", "offset_ticks", "first_tick")
-    )
+    # the plan keeps them derived: 6 columns stored, not 14 (v1 with v0 as the nodes' speeds, the ramps' accelerations,
+    # where the segments lie and the groups' ticks made where they are read)
+    assert sorted(derived.columns) == sorted(("v_nodes", "vp", "t_acc", "t_cru", "t_dec", "offset_ticks"))
     assert derived.cuts is not None and sorted(stored.columns) != sorted(derived.columns)
     n = len(derived)
     for k0, k1 in ((0, 1), (5, 17), (n // 3, n // 2), (n - 3, n), (0, n)):
@@ -275,8 +277,9 @@ def _split_program():
 
 
 def test_blend_trims_and_pieces_made_block_by_block_are_the_same_spans(monkeypatch):
-    """:func:`~jaxcnc.geometry.blend._trim` evaluates and :func:`~jaxcnc.geometry.blend._blend_fields` places its
-    pieces in blocks (bounded temporaries); blocks of a few rows give the same spans, bit for bit."""
+    """:func:`~jaxcnc.geometry.blend._trim` evaluates, :func:`~jaxcnc.geometry.blend._blend_round` makes the blends
+    and :func:`~jaxcnc.geometry.blend._blend_fields` places its pieces in blocks (bounded temporaries); blocks of a
+    few rows give the same spans, bit for bit."""
     import jaxcnc.geometry.blend as blend
 
     prog = _split_program()
@@ -287,7 +290,10 @@ def test_blend_trims_and_pieces_made_block_by_block_are_the_same_spans(monkeypat
     assert len(pieces) > 3  # blends were split, in several rounds
     monkeypatch.setattr(blend, "TRIM_BLOCK", 5)
     monkeypatch.setattr(blend, "PLACE_BLOCK", 3)
+    monkeypatch.setattr(blend, "KERNEL_CHUNK", 16)
+    pieces.clear()
     blocks = build_spans(prog, 0.5)
+    assert pieces[0] == 16  # the blends were made in chunks
     for f in SPAN_FIELDS:
         assert np.array_equal(getattr(blocks, f), getattr(whole, f)), f
     for f in ("coeffs", "timing", "length_err"):
@@ -308,3 +314,38 @@ def test_a_large_program_hands_free_heap_back_before_its_spans_are_built(monkeyp
     monkeypatch.setattr(job, "TRIM_BLOCKS", 100)
     _same_plan(plan_job(prog, m).plan, first)
     assert calls == [1]
+
+
+def test_group_and_first_ticks_derived_from_the_groups_are_the_alignments_own():
+    """A plan keeps each group's first tick once (:class:`~jaxcnc.planners.timelaw.GroupTicks`), not
+    ``group_tick`` and ``first_tick`` per segment: read whole, in windows of rows or at given segments they are
+    :func:`~jaxcnc.planners.timelaw.align_to_ticks`' own columns, bit for bit, and the segment at a tick is the one
+    a search of that ``first_tick`` finds."""
+    from jaxcnc.planners.timelaw import align_to_ticks
+
+    prog = cam_polyline(2000)
+    lines = prog.kind.size
+    stop = np.zeros(lines, bool)
+    stop[[300, 301, 1200]] = True  # rests inside the program: several groups
+    prog = dataclasses.replace(prog, stop_before=stop)
+    plan = plan_job(prog, parse_machine(BENCH_MACHINE + "corner_tol_mm = 0.01\n", "<bench>")).plan
+    assert plan.groups is not None and "group_tick" not in plan.columns and "first_tick" not in plan.columns
+    assert plan.groups.first_segment.size >= 4
+    n = len(plan)
+    mb = bucket_size(n)  # padded as the planner pads them (the scans' sums in the same order)
+    times = {k: np.r_[getattr(plan, k), np.zeros(mb - n)] for k in ("t_acc", "t_cru", "t_dec")}
+    ref = jax.jit(align_to_ticks)(times, np.r_[plan.v0 == 0.0, np.ones(mb - n, bool)], plan.tick_hz)  # as planned
+    ref = {k: np.asarray(v)[:n] if np.ndim(v) else v for k, v in ref.items()}
+    np.testing.assert_array_equal(ref["offset_ticks"], plan.offset_ticks)
+    for f in ("group_tick", "first_tick"):
+        want = np.asarray(ref[f])
+        assert plan.column(f).dtype == want.dtype == np.int64
+        np.testing.assert_array_equal(plan.column(f), want)
+        for k0, k1 in ((0, 1), (7, 300), (n - 5, n)):
+            np.testing.assert_array_equal(plan.rows(k0, k1, (f,))[f], want[k0:k1])
+    assert int(ref["n_ticks"]) == plan.n_ticks
+    first = np.asarray(ref["first_tick"])
+    for tick in (0, 1, int(first[n // 2]), int(first[n // 2]) + 1, plan.n_ticks - 1, plan.n_ticks):
+        assert plan.segment_at_tick(tick) == max(int(np.searchsorted(first, tick, side="right")) - 1, 0)
+    spans = int(plan.span[-1]) + 1
+    np.testing.assert_array_equal(plan.span_start_ticks(spans), first[plan.span_first_segment(spans)])

@@ -44,6 +44,7 @@ from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
+from jaxcnc.memory import release_free_heap
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -101,15 +102,20 @@ def _pieces(spans: Spans, arrays: dict, idx: np.ndarray, s_lo: np.ndarray, s_hi:
 
 
 def _blend_points(
-    spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, k_mid: np.ndarray | None = None
+    spans: Spans,
+    i: np.ndarray,
+    ell_a: np.ndarray,
+    ell_b: np.ndarray,
+    k_mid: np.ndarray | None = None,
+    arrays: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quintic G2 blends of the junctions after spans ``i``, which are cut back by ``ell_a`` and the spans
     after them by ``ell_b``: control points ``(J, 6, 3)``, Ta, Tb.
 
     ``k_mid``: ``(n, 3)`` curvature vectors at the middles of consumed lines (:func:`_chain_curvature`),
-    used where a blend starts or ends there.
+    used where a blend starts or ends there. ``arrays``: ``span_arrays(spans)``, where made already.
     """
-    arrays = span_arrays(spans)
+    arrays = span_arrays(spans) if arrays is None else arrays
     qa, ta, ka = evaluate_path(arrays, i, spans.length[i] - ell_a, 2)
     qb, tb, kb = evaluate_path(arrays, i + 1, ell_b, 2)
     if k_mid is not None:
@@ -147,6 +153,51 @@ def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+def _blend_round(
+    spans: Spans,
+    j: np.ndarray,
+    ell_a: np.ndarray,
+    ell_b: np.ndarray,
+    k_mid: np.ndarray | None,
+    corner: np.ndarray,
+    need: np.ndarray,
+) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """:func:`_blend_points` and :func:`_kernel` of the junctions after spans ``j``, ``KERNEL_CHUNK`` junctions at a
+    time: the points of all blends and their evaluation's temporaries never exist at once (a 1 M-block contour:
+    ~400 MB less at the peak of building its blends). The values are those of the two calls over all junctions.
+
+    Returns the kernel's outputs for every blend, with the start points ``origin`` ``(J, 3)`` and the end
+    tangents ``t0``, ``t1`` replaced by the spans' ``Ta``, ``Tb`` (which :func:`_blend_fields` puts at a whole
+    blend's ends in any case); the rows ``kept`` ``(k,)`` (sorted) whose control points ``(k, 6, 3)`` are kept:
+    those ``need`` ``(J,)`` marks and those :func:`_blend_fields` will split (their path parameter strays more than
+    ``BLEND_SPEED_TOL`` from arc length).
+    """
+    n = j.size
+    arrays = span_arrays(spans)
+    out: dict[str, np.ndarray] = {}
+    kept, kept_pts = [], []
+    for lo in range(0, max(n, 1), KERNEL_CHUNK):
+        hi = min(n, lo + KERNEL_CHUNK)
+        pts, ta, tb = _blend_points(spans, j[lo:hi], ell_a[lo:hi], ell_b[lo:hi], k_mid, arrays)
+        part = _kernel(pts, corner[lo:hi])
+        part.update(origin=pts[:, 0], t0=ta, t1=tb)
+        rows = np.flatnonzero(need[lo:hi] | ~(part["err"] <= poly.BLEND_SPEED_TOL))
+        kept.append(lo + rows)
+        kept_pts.append(pts[rows])
+        del pts
+        if hi - lo == n:
+            out = {k: np.ascontiguousarray(v) for k, v in part.items()}  # (origin: not a view that holds pts)
+            break
+        for k, v in part.items():  # into arrays of all n blends, chunk by chunk (no list of parts to join)
+            if k not in out:
+                out[k] = np.empty((n,) + v.shape[1:], v.dtype)
+            out[k][lo:hi] = v
+    return out, np.concatenate(kept), np.concatenate(kept_pts)
+
+
+#: Programs with at least this many blends hand the C heap's free pages back between the stages of building them
+#: (:func:`~jaxcnc.memory.release_free_heap`).
+TRIM_BLENDS = 1 << 18
 #: Blends measured by one call of the kernel.
 KERNEL_CHUNK = 1 << 16
 #: A harmless blend (a straight quintic) for the padding rows of :func:`_kernel`.
@@ -238,6 +289,9 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
     if j.size == 0:
         return spans
+    large = j.size >= TRIM_BLENDS
+    if large:
+        release_free_heap()  # TRIMPOINT_A
     half = 0.5 * spans.length
     ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
@@ -262,30 +316,34 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     corner = spans.origin[j + 1]  # the vertex: where the second span begins (before it is trimmed)
     frozen = np.zeros(len(spans), bool)  # spans left as they are: no snap, their own curvature
     for _ in range(CHAIN_ROUNDS + 1):
-        pts = found = None  # the last round's (J, 6, 3) points and kernel outputs: dead before the new ones
+        found = kept = kept_pts = None  # the last round's kernel outputs: dead before the new ones
         ell_a, ell_b = ell.copy(), ell.copy()
         _consume(spans, j, ell_a, ell_b, frozen)
         k_mid = _chain_curvature(spans, j, ell_a, ell_b)
         k_mid[frozen] = 0.0
-        pts, ta, tb = _blend_points(spans, j, ell_a, ell_b, k_mid)
-        found = _kernel(pts, corner)
         changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
-        dev = found["dev"].copy()
         other = np.flatnonzero(changed & ~lines)  # arcs take part: measure against the arc itself
+        if large:
+            release_free_heap()  # TRIMPOINT_B
+        found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, changed & ~lines)
+        dev = found["dev"].copy()
         if other.size:
-            dev[other] = _deviation(spans, j[other], ell_a[other], ell_b[other], _coeffs(pts[other]))
+            pts = kept_pts[np.searchsorted(kept, other)]
+            dev[other] = _deviation(spans, j[other], ell_a[other], ell_b[other], _coeffs(pts))
+            del pts
         bad = np.flatnonzero(changed & (dev > tol[j]))
         if bad.size == 0:
             break
         frozen[j[bad]] = frozen[j[bad] + 1] = True  # give up the snap and the chain curvature there
     else:  # still too far: plain symmetric blends everywhere (within tol by construction or measurement)
-        pts = found = None
-        ell_a, ell_b, k_mid = ell.copy(), ell.copy(), None
-        pts, ta, tb = _blend_points(spans, j, ell_a, ell_b)
-        found = _kernel(pts, corner)
+        found = kept = kept_pts = None
+        ell_a, ell_b = ell.copy(), ell.copy()
+        found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, None, corner, np.zeros(j.size, bool))
     del k_mid, corner, frozen, dev, changed
-    fields_, table, owner = _blend_fields(spans, j, pts, found, ta, tb)
-    del pts, found, ta, tb  # the blends' fields hold what is kept of them
+    fields_, table, owner = _blend_fields(spans, j, found, kept, kept_pts)
+    del found, kept, kept_pts  # the blends' fields hold what is kept of them
+    if large:
+        release_free_heap()  # TRIMPOINT_C
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
     trimmed, arcs = _trim(spans, trim_start, trim_end)
     del trim_start, trim_end
@@ -298,30 +356,36 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
 
 
 def _blend_fields(
-    spans: Spans, j: np.ndarray, pts: np.ndarray, found: dict, ta: np.ndarray, tb: np.ndarray
+    spans: Spans, j: np.ndarray, found: dict, kept_rows: np.ndarray, kept_pts: np.ndarray
 ) -> tuple[dict[str, np.ndarray], PolyTable, np.ndarray]:
     """Blend spans (span fields, poly table rows, owning junction of each piece), each blend split in
-    halves until its path parameter is within ``BLEND_SPEED_TOL`` of arc length."""
+    halves until its path parameter is within ``BLEND_SPEED_TOL`` of arc length.
+
+    ``found``: :func:`_blend_round`'s outputs for the blends (``t0``, ``t1`` their ends' tangents); ``kept_rows``,
+    ``kept_pts``: the rows whose control points it kept (every blend to split among them)."""
+    ta, tb = found["t0"], found["t1"]
     parts, owner = [], np.arange(j.size)
     key = owner.astype(np.float64)
     width = 1.0
+    pts = None  # the control points of this round's pieces (the first round's: kept_pts)
     for rnd in range(poly.MAX_SPLITS + 1):
         ok = (found["err"] <= poly.BLEND_SPEED_TOL) | (rnd == poly.MAX_SPLITS)
-        parts.append((found, pts, ok, owner, key))
+        parts.append((found, found.pop("origin"), ok, owner, key))
         bad = ~ok
         if not bad.any():
             break
-        coeffs = _coeffs(pts[bad])
+        split = kept_pts[np.searchsorted(kept_rows, np.flatnonzero(bad))] if pts is None else pts[bad]
+        coeffs = _coeffs(split)
         n_bad = int(bad.sum())
         half = np.full(n_bad, 0.5)
-        halves = [restrict(coeffs, pts[bad, 0], a, b) for a, b in ((np.zeros(n_bad), half), (half, np.ones(n_bad)))]
+        halves = [restrict(coeffs, split[:, 0], a, b) for a, b in ((np.zeros(n_bad), half), (half, np.ones(n_bad)))]
         pts = np.concatenate([power_to_bezier(c) + o[:, None] for c, o in halves])
         owner = np.concatenate([owner[bad], owner[bad]])
         width /= 2
         key = np.concatenate([key[bad], key[bad] + width])
-        found = _kernel(pts, pts[:, 0])
+        found = dict(_kernel(pts, pts[:, 0]), origin=pts[:, 0])
     if len(parts) == 1 and parts[0][2].all():  # no blend split: the kernel's arrays, in order already
-        out = dict(parts[0][0], origin=parts[0][1][:, 0].copy(), owner=parts[0][3])  # (a view would hold pts)
+        out = dict(parts[0][0], origin=parts[0][1], owner=parts[0][3])
     else:  # the pieces of every round, ordered by key; one field at a time, placed block by block into its rows
         order = np.argsort(np.concatenate([p[4][p[2]] for p in parts]), kind="stable")
         row = np.empty_like(order)
@@ -333,17 +397,21 @@ def _blend_fields(
             out[f] = _placed(parts, kept, row, lambda p, f=f: p[0][f])  # too): one field at a time is held twice
             for p in parts:
                 p[0].pop(f)
-        out["origin"] = _placed(parts, kept, row, lambda p: p[1][:, 0])
+        out["origin"] = _placed(parts, kept, row, lambda p: p[1])
         out["owner"] = _placed(parts, kept, row, lambda p: p[3])
         del row, kept
     del parts
     owner = out["owner"]
-    # a blend's ends have exactly its neighbours' tangents
-    first = np.concatenate([[True], owner[1:] != owner[:-1]])
-    last = np.concatenate([owner[1:] != owner[:-1], [True]])
-    t_in, t_out = out["t0"].copy(), out["t1"].copy()
-    t_in[first], t_out[last] = ta[owner[first]], tb[owner[last]]
     n = owner.size
+    # a blend's ends have exactly its neighbours' tangents (the first round's t0, t1: a whole blend's pieces start
+    # and end where their blend does)
+    if n == j.size:  # no blend split: each piece is a whole blend
+        t_in, t_out = out["t0"], out["t1"]
+    else:
+        first = np.concatenate([[True], owner[1:] != owner[:-1]])
+        last = np.concatenate([owner[1:] != owner[:-1], [True]])
+        t_in, t_out = out["t0"].copy(), out["t1"].copy()
+        t_in[first], t_out[last] = ta[owner[first]], tb[owner[last]]
     fields_ = dict(
         kind=np.full(n, SpanKind.BLEND),
         block=spans.block[j + 1][owner],

@@ -15,6 +15,7 @@ tick plus a float offset (in ticks) inside the group, so an hour at 100 kHz lose
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 
 import jax
@@ -30,6 +31,7 @@ from jaxcnc.planners.protocol import GROUP_END_TOL_TICKS, DeviceLaw, LawWindow, 
 __all__ = [
     "PLAN_COLUMNS",
     "PLAN_KEYS",
+    "GroupTicks",
     "Plan",
     "SegmentCuts",
     "align_to_ticks",
@@ -75,6 +77,19 @@ def ramp_accel(vp: np.ndarray, v: np.ndarray, t: np.ndarray) -> np.ndarray:
 _ACCEL_BLOCK = 1 << 18
 #: Spans per block where a :class:`SegmentCuts` makes where many segments lie.
 _CUT_BLOCK = 1 << 16
+
+
+@dataclass(frozen=True, eq=False)
+class GroupTicks:
+    """The groups of a plan (:func:`align_to_ticks`): ``first_segment`` ``(G,)`` the first segment of each (rising),
+    ``tick`` ``(G,)`` int64 its first tick — every segment's ``group_tick`` with no per-segment storage."""
+
+    first_segment: np.ndarray
+    tick: np.ndarray
+
+    def tick_of(self, k: np.ndarray) -> np.ndarray:
+        """``group_tick`` of segments ``k`` (indices)."""
+        return self.tick[np.searchsorted(self.first_segment, k, side="right") - 1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,14 +149,17 @@ class Plan(TimeLaw):
     bit — ``v_nodes`` ``(n + 1,)`` in place of ``v0`` and ``v1`` (a segment ends at the speed the next starts at),
     ``a_acc``/``a_dec`` left out (:func:`ramp_accel` of the speeds and times), ``span``/``s_start``/``length`` left
     out with ``cuts`` (:class:`SegmentCuts`). The attributes read the same either way; the tick stage asks for
-    windows of rows (:meth:`rows`), so a derived column is never made whole there. A 1 M-block blended contour
-    (5.2 M segments) keeps 8 columns instead of 14: 579 -> 331 MB.
+    windows of rows (:meth:`rows`), so a derived column is never made whole there. ``group_tick`` and ``first_tick``
+    left out with ``groups`` (:class:`GroupTicks`: a group's segments share its first tick, and ``first_tick`` is
+    ``group_tick + ceil(offset_ticks)``). A 1 M-block blended contour (5.2 M segments) keeps 6 columns instead of
+    14: 579 -> 248 MB.
     """
 
     columns: dict
     n_ticks: int
     tick_hz: float
     cuts: SegmentCuts | None = None
+    groups: GroupTicks | None = None
 
     def __post_init__(self) -> None:
         for v in self.columns.values():
@@ -165,7 +183,28 @@ class Plan(TimeLaw):
             return ramp_accel(cols["vp"][k0:k1], self.column("v1", k0, k1), cols["t_dec"][k0:k1])
         if name in ("span", "s_start", "length") and self.cuts is not None:
             return self.cuts.rows(k0, k1)[("span", "s_start", "length").index(name)]
+        if name in ("group_tick", "first_tick") and self.groups is not None:
+            return self._ticks_of(name, np.arange(k0, max(k0, k1)))
         raise KeyError(f"a Plan has no column {name!r}")
+
+    def _ticks_of(self, name: str, k: np.ndarray) -> np.ndarray:
+        """``group_tick`` or ``first_tick`` of segments ``k`` (indices), without making the whole column."""
+        if name in self.columns:
+            return self.columns[name][k]
+        group_tick = self.groups.tick_of(k)
+        if name == "group_tick":
+            return group_tick
+        return group_tick + np.ceil(self.columns["offset_ticks"][k]).astype(np.int64)  # as align_to_ticks does
+
+    def segment_at_tick(self, tick: int) -> int:
+        """The last segment whose first tick is at or before ``tick`` (0 before the first)."""
+        n = len(self)
+        if "first_tick" in self.columns:
+            k = int(np.searchsorted(self.columns["first_tick"], tick, side="right")) - 1
+        else:  # the first ticks rise with the segments: bisect them, made one at a time
+            first_tick = lambda i: int(self._ticks_of("first_tick", np.array([i]))[0])  # noqa: E731
+            k = bisect.bisect_right(range(n), tick, key=first_tick) - 1
+        return int(np.clip(k, 0, n - 1))
 
     def rows(self, k0: int, k1: int, names: tuple[str, ...] = PLAN_COLUMNS) -> dict[str, np.ndarray]:
         """Columns ``names`` of segments ``k0..k1-1`` (where the segments lie made once for all three)."""
@@ -208,7 +247,7 @@ class Plan(TimeLaw):
 
     def span_start_ticks(self, n_spans: int) -> np.ndarray:
         """``(n_spans,)`` the first tick at or after each span's start."""
-        return self.first_tick[self.span_first_segment(n_spans)]
+        return self._ticks_of("first_tick", self.span_first_segment(n_spans))
 
     def ticks_at(self, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
         """The tick nearest to where segment ``seg`` has covered ``s`` mm (the trapezoid inverted exactly)."""
@@ -216,7 +255,8 @@ class Plan(TimeLaw):
         tau = trapezoid_time_at(
             self.v0[k], self.vp[k], self.a_acc[k], self.a_dec[k], self.t_acc[k], self.t_cru[k], self.t_dec[k], s
         )
-        return np.rint(self.group_tick[k] + self.offset_ticks[k] + tau * self.tick_hz).astype(np.int64)
+        group_tick = self._ticks_of("group_tick", np.asarray(k))
+        return np.rint(group_tick + self.offset_ticks[k] + tau * self.tick_hz).astype(np.int64)
 
     def _span_at(self, k: int) -> int:
         """The span segment ``k`` lies on (without making the whole column where it is derived)."""
@@ -233,10 +273,9 @@ class Plan(TimeLaw):
         whole law (the last segment whose first tick is at or before the tick) up to the first tick of the
         segment after them: ``tick_end``."""
         n = len(self)
-        first_tick = self.columns["first_tick"]
-        k0 = int(np.clip(np.searchsorted(first_tick, tick, side="right") - 1, 0, n - 1))
+        k0 = self.segment_at_tick(tick)
         k1 = min(k0 + segments, n)
-        tick_end = int(first_tick[k1]) if k1 < n else self.n_ticks + 1
+        tick_end = int(self.column("first_tick", k1, k1 + 1)[0]) if k1 < n else self.n_ticks + 1
         span0 = self._span_at(k0)
         law = DeviceLaw(plan_span_s, self._device_rows(k0, k1, segments, span0))
         return LawWindow(law, span0, self._span_at(k1 - 1) + 1, tick_end)
@@ -289,8 +328,8 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
         prof: output of :func:`trapezoids`.
         rest_start: ``(n,)`` bool, the motion is at rest at the start of the span (a group starts).
     Returns:
-        ``prof`` plus ``group_tick`` (int64), ``offset_ticks``, ``first_tick`` (int64) and
-        ``n_ticks`` (scalar int64).
+        ``prof`` plus ``group_tick`` (int64), ``offset_ticks``, ``first_tick`` (int64), ``n_ticks`` (scalar int64)
+        and ``g_start`` ``(n,)`` int64, the first tick of each group in order (rows past the last group: unused).
     """
     n = rest_start.shape[0]
     dur_ticks = (prof["t_acc"] + prof["t_cru"] + prof["t_dec"]) * tick_hz
@@ -303,6 +342,7 @@ def align_to_ticks(prof: dict[str, jnp.ndarray], rest_start: jnp.ndarray, tick_h
     dur = dur_ticks
     g_start = jnp.cumsum(g_whole) - g_whole
     offset = jnp.where(rest_start, 0.0, _segmented_cumsum(dur, rest_start) - dur)  # exclusive, exact 0 at starts
+    out["g_start"] = g_start  # each group's first tick (groups 0..G-1; the rest of the rows: past the end)
     out["group_tick"] = g_start[group]
     out["offset_ticks"] = offset
     out["first_tick"] = out["group_tick"] + jnp.ceil(offset).astype(jnp.int64)

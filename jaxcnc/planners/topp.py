@@ -67,7 +67,7 @@ from jaxcnc.planners.phaseplane import (
 )
 from jaxcnc.planners.protocol import Planner, PlanRequest
 from jaxcnc.planners.registry import register_planner
-from jaxcnc.planners.timelaw import Plan, SegmentCuts, align_to_ticks, ramp_accel, trapezoids
+from jaxcnc.planners.timelaw import GroupTicks, Plan, SegmentCuts, align_to_ticks, ramp_accel, trapezoids
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -388,7 +388,7 @@ def _junction_program():
 def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
     """:func:`~jaxcnc.planners.timelaw.align_to_ticks`, returning only what it adds to the segments."""
     out = align_to_ticks(prof, rest_start, tick_hz)
-    return {k: out[k] for k in ("group_tick", "offset_ticks", "first_tick", "n_ticks")}
+    return {k: out[k] for k in ("g_start", "offset_ticks", "n_ticks")}
 
 
 def interior_excess(
@@ -1102,14 +1102,16 @@ class _SegmentTable:
         times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
         out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
         del times
-        columns = {k: np.asarray(out[k][:n]) for k in ("group_tick", "offset_ticks", "first_tick")}
+        first_segment = np.flatnonzero(cols["rest"][:n])
+        groups = GroupTicks(first_segment, np.array(out.pop("g_start")[: first_segment.size]))  # (not a view of mb)
+        columns = {"offset_ticks": np.asarray(out["offset_ticks"][:n])}
         columns.update({k: cols[k][:n] for k in _SEGMENT_KEYS + self._WHERE if k in cols and k != "v0"})
         if self.v1 is None:
             columns["v_nodes"] = cols["v0"][: n + 1]
         else:
             columns["v0"], columns["v1"] = cols["v0"][:n], self.v1[:n]
         cuts = SegmentCuts.of(self.span_length, self.counts) if self.derived else None
-        return Plan(columns, int(out["n_ticks"]), tick_hz, cuts)
+        return Plan(columns, int(out["n_ticks"]), tick_hz, cuts, groups)
 
 
 def _grid_rows(span_length: np.ndarray, counts: np.ndarray, first: int, last: int) -> tuple[np.ndarray, ...]:
