@@ -197,3 +197,21 @@ def test_programs_of_old_source_versions_are_removed(tmp_path):
     assert (root / "new" / "q.exported").read_bytes() == b"program"
     jitcache._write(root / "new", root / "new" / "r.exported", b"again")  # the version's later programs keep all
     assert sorted(p.name for p in root.iterdir()) == ["new", "v2", "v3"]
+
+
+def test_a_cache_directory_that_cannot_be_written_falls_back_to_jax_jit(tmp_path, monkeypatch):
+    """The exports folder under a regular file (mkdir fails, as it does on a read-only cache for a user who may
+    not write there): the program runs as ``jax.jit`` runs it, nothing is stored, and nothing is raised."""
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("a file where the cache folder would be")
+    monkeypatch.setattr(jitcache, "DIRECTORY", blocker / "exports")
+    monkeypatch.delenv("JAXCNC_EXPORT_CACHE", raising=False)
+    _poly.calls.clear()
+    x = np.linspace(0.0, 3.0, 9)
+    got = _poly(x, {"a": 2.0}, power=2)
+    want = _poly.jitted(x, {"a": 2.0}, power=2)
+    for k in want:
+        np.testing.assert_array_equal(np.asarray(got[k]), np.asarray(want[k]))
+    assert list(_poly.calls.values()) == [None]  # looked up once, then plain jax.jit from now on
+    assert blocker.read_text().startswith("a file")
+    _poly.calls.clear()
