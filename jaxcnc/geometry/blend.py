@@ -163,8 +163,9 @@ def _blend_round(
     need: np.ndarray,
 ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """:func:`_blend_points` and :func:`_kernel` of the junctions after spans ``j``, ``KERNEL_CHUNK`` junctions at a
-    time: the points of all blends and their evaluation's temporaries never exist at once (a 1 M-block contour:
-    ~400 MB less at the peak of building its blends). The values are those of the two calls over all junctions.
+    time: the points of all blends (144 MB at 1 M) and their evaluation's temporaries never exist at once (the
+    1 M-block contour's ``build_spans`` peaked at ~1.56-1.60 GB resident before, ~1.41 GB with the trims of
+    :func:`blend_path`). The values are those of the two calls over all junctions, bit for bit.
 
     Returns the kernel's outputs for every blend, with the start points ``origin`` ``(J, 3)`` and the end
     tangents ``t0``, ``t1`` replaced by the spans' ``Ta``, ``Tb`` (which :func:`_blend_fields` puts at a whole
@@ -291,7 +292,7 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         return spans
     large = j.size >= TRIM_BLENDS
     if large:
-        release_free_heap()  # TRIMPOINT_A
+        release_free_heap()  # what building the rows' spans freed: the blends' arrays start lean
     half = 0.5 * spans.length
     ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
@@ -324,7 +325,7 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
         other = np.flatnonzero(changed & ~lines)  # arcs take part: measure against the arc itself
         if large:
-            release_free_heap()  # TRIMPOINT_B
+            release_free_heap()  # the last round's outputs and the junctions' temporaries
         found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, changed & ~lines)
         dev = found["dev"].copy()
         if other.size:
@@ -343,7 +344,7 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     fields_, table, owner = _blend_fields(spans, j, found, kept, kept_pts)
     del found, kept, kept_pts  # the blends' fields hold what is kept of them
     if large:
-        release_free_heap()  # TRIMPOINT_C
+        release_free_heap()  # the kernel's chunks and the rounds' arrays, before the trims and the spans' assembly
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
     trimmed, arcs = _trim(spans, trim_start, trim_end)
     del trim_start, trim_end
@@ -361,8 +362,9 @@ def _blend_fields(
     """Blend spans (span fields, poly table rows, owning junction of each piece), each blend split in
     halves until its path parameter is within ``BLEND_SPEED_TOL`` of arc length.
 
-    ``found``: :func:`_blend_round`'s outputs for the blends (``t0``, ``t1`` their ends' tangents); ``kept_rows``,
-    ``kept_pts``: the rows whose control points it kept (every blend to split among them)."""
+    ``found``: :func:`_blend_round`'s outputs for the blends (``t0``, ``t1`` their ends' tangents; its ``origin`` is
+    taken out of it); ``kept_rows``, ``kept_pts``: the rows whose control points it kept (every blend to split among
+    them)."""
     ta, tb = found["t0"], found["t1"]
     parts, owner = [], np.arange(j.size)
     key = owner.astype(np.float64)

@@ -62,6 +62,7 @@ def plan_arrays(
     x_node = lookahead(node_cap, delta)
     prof = trapezoids(x_node, x_cap, a_t, length, dwell)
     out = align_to_ticks(prof, x_node[:-1] == 0.0, tick_hz)
+    del out["g_start"]  # (the plan stores group_tick per segment)
     out["x_node"] = x_node
     return out
 
