@@ -144,9 +144,9 @@ def test_where_segments_lie_is_derived_from_the_counts_and_equals_the_stored_col
     _same_plan(stored, derived)
     monkeypatch.setattr(topp._SegmentTable, "_derivable", lambda self, grid, commit: False)
     _same_plan(plan_job(prog, m).plan, derived)  # stored from the first window
-    # the plan keeps them derived: 6 columns stored, not 14 (v1 with v0 as the nodes' speeds, the ramps' accelerations,
-    # where the segments lie and the groups' ticks made where they are read)
-    assert sorted(derived.columns) == sorted(("v_nodes", "vp", "t_acc", "t_cru", "t_dec", "offset_ticks"))
+    # the plan keeps them derived: 2 columns stored, not 14 (v1 with v0 as the nodes' speeds, the ramps' accelerations,
+    # where the segments lie, the groups' ticks and the trapezoids from the ramps made where they are read)
+    assert sorted(derived.columns) == ["offset_ticks", "v_nodes"] and derived.ramps is not None
     assert derived.cuts is not None and sorted(stored.columns) != sorted(derived.columns)
     n = len(derived)
     for k0, k1 in ((0, 1), (5, 17), (n // 3, n // 2), (n - 3, n), (0, n)):
@@ -349,3 +349,36 @@ def test_group_and_first_ticks_derived_from_the_groups_are_the_alignments_own():
         assert plan.segment_at_tick(tick) == max(int(np.searchsorted(first, tick, side="right")) - 1, 0)
     spans = int(plan.span[-1]) + 1
     np.testing.assert_array_equal(plan.span_start_ticks(spans), first[plan.span_first_segment(spans)])
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    return a.view(np.int64) if a.dtype == np.float64 else a
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+def test_ramps_keep_the_trapezoids_bit_for_bit(monkeypatch, corner_tol):
+    """Large plans keep their trapezoids as :class:`~jaxcnc.planners.timelaw.Ramps` (a duration and which ramp;
+    the segments that are not one ramp or cruise whole): every column, whole or in windows of rows, holds the bits
+    of the plan that stores the four columns, and the ticks are the same."""
+    import jaxcnc.planners.topp as topp
+    from jaxcnc.planners.timelaw import RAMP_GENERAL
+
+    prog = cam_polyline(3000)
+    m = parse_machine(BENCH_MACHINE + f"corner_tol_mm = {corner_tol}\n", "<bench>")
+    monkeypatch.setattr(topp, "WINDOW_INTERVALS", 1 << 11)  # several windows
+    columns = plan_job(prog, m).plan
+    assert columns.ramps is None and "t_acc" in columns.columns  # a small plan stores them
+    monkeypatch.setattr(topp, "TRIM_SEGMENTS", 1)  # the large plans' way on a small one
+    ramps = plan_job(prog, m).plan
+    assert ramps.ramps is not None and not {"vp", "t_acc", "t_cru", "t_dec"} & set(ramps.columns)
+    phase = ramps.ramps.phase
+    assert (phase != RAMP_GENERAL).any() and (phase == RAMP_GENERAL).any()  # both kinds of segment
+    assert ramps.n_ticks == columns.n_ticks
+    n = len(ramps)
+    for f in PLAN_FIELDS:
+        np.testing.assert_array_equal(_bits(getattr(ramps, f)), _bits(getattr(columns, f)), err_msg=f)
+        for k0, k1 in ((0, 1), (5, 170), (n // 2, n // 2 + 333), (n - 4, n)):
+            got = ramps.rows(k0, k1, (f,))[f]
+            np.testing.assert_array_equal(_bits(got), _bits(getattr(columns, f)[k0:k1]), err_msg=f"{f} {k0}:{k1}")
+    np.testing.assert_array_equal(_bits(ramps.duration_s), _bits(columns.duration_s))

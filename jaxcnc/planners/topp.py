@@ -67,7 +67,17 @@ from jaxcnc.planners.phaseplane import (
 )
 from jaxcnc.planners.protocol import Planner, PlanRequest
 from jaxcnc.planners.registry import register_planner
-from jaxcnc.planners.timelaw import GroupTicks, Plan, SegmentCuts, align_to_ticks, ramp_accel, trapezoids
+from jaxcnc.planners.timelaw import (
+    RAMP_COLUMNS,
+    RAMP_GENERAL,
+    GroupTicks,
+    Plan,
+    Ramps,
+    SegmentCuts,
+    align_to_ticks,
+    ramp_accel,
+    trapezoids,
+)
 
 #: Rounds of cutting curved spans finer where the interior check fails, and the factor per round.
 MAX_REFINE = 6
@@ -388,6 +398,15 @@ def _junction_program():
 def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
     """:func:`~jaxcnc.planners.timelaw.align_to_ticks`, returning only what it adds to the segments."""
     out = align_to_ticks(prof, rest_start, tick_hz)
+    return {k: out[k] for k in ("g_start", "offset_ticks", "n_ticks")}
+
+
+@cached_jit
+def _align_total(duration: jnp.ndarray, rest_start: jnp.ndarray, tick_hz) -> dict:
+    """:func:`_align` of segments given by their whole durations ``(m,)`` (``t_acc + t_cru + t_dec``, summed as the
+    alignment sums them: the same ticks and offsets, bit for bit)."""
+    zero = jnp.zeros_like(duration)
+    out = align_to_ticks({"t_acc": duration, "t_cru": zero, "t_dec": zero}, rest_start, tick_hz)
     return {k: out[k] for k in ("g_start", "offset_ticks", "n_ticks")}
 
 
@@ -932,7 +951,7 @@ def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
 TRIM_SEGMENTS = 1 << 20
 
 #: Buckets whose tick alignment this process has compiled (see :meth:`_SegmentTable.prepare`).
-_ALIGN_COMPILED: set[int] = set()
+_ALIGN_COMPILED: set[tuple[int, bool]] = set()
 
 
 class _SegmentTable:
@@ -955,11 +974,20 @@ class _SegmentTable:
       of the speeds and times kept anyway (:func:`~.timelaw.ramp_accel`), made by the plan where they are read —
       stored only from the first window where that differs in a bit (never seen).
 
-    A 1 M-block blended contour's plan (5.2 M segments): 8 columns kept instead of 14, 579 -> 331 MB.
+    In the same large plans the trapezoids are kept as :class:`~.timelaw.Ramps` (a duration and which ramp, for the
+    92 % of a fine grid's segments that are one ramp or cruise; the others whole), and the groups' first ticks once
+    (:class:`~.timelaw.GroupTicks`). A 1 M-block blended contour's plan (5.2 M segments): 579 -> ~150 MB.
     """
 
-    _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {"rest": True, "length": 0.0, "span": 0, "s_start": 0.0}
-    _DTYPES = {"rest": np.bool_, "span": np.int64}
+    _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {
+        "rest": True,
+        "length": 0.0,
+        "span": 0,
+        "s_start": 0.0,
+        "duration": 0.0,
+        "phase": RAMP_GENERAL,
+    }
+    _DTYPES = {"rest": np.bool_, "span": np.int64, "phase": np.int8}
     _WHERE = ("length", "span", "s_start")
     _ACCEL = ("a_acc", "a_dec")
 
@@ -970,28 +998,34 @@ class _SegmentTable:
         self.derived = counts is not None  # where the segments lie: derived from counts (True) or stored
         self.derived_accel = self.derived  # the ramps' accelerations: derived from speeds and times, or stored
         self.next_span = 0  # the first span no committed segment covers yet
+        self.ramps = self.derived  # the trapezoids as Ramps (True) or four columns
         derived = (self._WHERE if self.derived else ()) + (self._ACCEL if self.derived_accel else ())
+        derived += RAMP_COLUMNS if self.ramps else ("duration", "phase")
         keep = [k for k in self._FILL if k != "v1" and k not in derived]
         # aligned: the tick alignment reads the duration columns in place (else XLA copies them, 3 x 8 bytes a row)
         self.cols = {k: aligned_array(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
         self.v1: np.ndarray | None = None  # None: v1[k] is v0[k + 1]
+        self.general: list[tuple[np.ndarray, np.ndarray]] = []  # (segments, (g, 4) trapezoids) the Ramps store whole
 
     def __len__(self) -> int:
         """Rows allocated (at least the segments expected)."""
-        return int(self.cols["t_acc"].shape[0])
+        return int(self.cols["rest"].shape[0])
 
     def prepare(self, tick_hz: float) -> None:
         """Compile the tick alignment for the bucket the plan will most likely have, now, while little memory
         is in use: compiled at the end, the compiler's working memory would sit on top of the whole plan's.
         Once per bucket and process (a run on zeros, discarded)."""
-        mb = self.cols["t_acc"].shape[0]
-        if mb not in _ALIGN_COMPILED:
+        mb = len(self)
+        if (mb, self.ramps) not in _ALIGN_COMPILED:
             zero = np.zeros(mb)
-            _align({"t_acc": zero, "t_cru": zero, "t_dec": zero}, np.ones(mb, bool), tick_hz)
-            _ALIGN_COMPILED.add(mb)
+            if self.ramps:
+                _align_total(zero, np.ones(mb, bool), tick_hz)
+            else:
+                _align({"t_acc": zero, "t_cru": zero, "t_dec": zero}, np.ones(mb, bool), tick_hz)
+            _ALIGN_COMPILED.add((mb, self.ramps))
 
     def _reserve(self, rows: int) -> None:
-        have = self.cols["t_acc"].shape[0]
+        have = len(self)
         if rows > have:
             grown = bucket_size(max(rows, have + have // 4))
             for k, a in self.cols.items():
@@ -1001,6 +1035,23 @@ class _SegmentTable:
             if self.v1 is not None:
                 v1, self.v1 = self.v1, np.empty(grown)
                 self.v1[: self.n] = v1[: self.n]
+
+    def _trapezoids(self, n: int) -> dict[str, np.ndarray]:
+        """``vp``, ``t_acc``, ``t_cru``, ``t_dec`` of the first ``n`` segments (views, or made from the ramps)."""
+        if not self.ramps:
+            return {k: self.cols[k][:n] for k in RAMP_COLUMNS}
+        return self._ramps(n).rows(0, n, self.cols["v0"][:n], self._v1(n))
+
+    def _ramps(self, n: int) -> Ramps:
+        """The first ``n`` segments' :class:`~.timelaw.Ramps` (views of the duration and phase columns)."""
+        at = [a for a, _ in self.general]
+        general = [g for _, g in self.general]
+        return Ramps(
+            self.cols["duration"][:n],
+            self.cols["phase"][:n],
+            np.concatenate(at) if at else np.zeros(0, np.int64),
+            np.concatenate(general) if general else np.zeros((0, 4)),
+        )
 
     def _derivable(self, grid: Grid, commit: int) -> bool:
         """The window's first ``commit`` grid rows are :func:`_grid_rows` of the spans they cover, bit for bit."""
@@ -1020,7 +1071,7 @@ class _SegmentTable:
 
     def _store_where(self) -> None:
         """From now on store where the segments lie; the rows so far are derived from the counts."""
-        rows = self.cols["t_acc"].shape[0]
+        rows = len(self)
         for k, a in zip(self._WHERE, self._where(self.n), strict=True):
             self.cols[k] = np.empty(rows, self._DTYPES.get(k, np.float64))
             self.cols[k][: self.n] = a
@@ -1032,8 +1083,8 @@ class _SegmentTable:
 
     def _accel(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """``a_acc, a_dec`` of the first ``n`` segments from their speeds and times (:func:`~.timelaw.ramp_accel`)."""
-        cols, v1 = self.cols, self._v1(n)
-        return tuple(ramp_accel(cols["vp"][:n], v[:n], cols[t][:n]) for v, t in ((cols["v0"], "t_acc"), (v1, "t_dec")))
+        trap, v1 = self._trapezoids(n), self._v1(n)
+        return tuple(ramp_accel(trap["vp"], v[:n], trap[t]) for v, t in ((self.cols["v0"], "t_acc"), (v1, "t_dec")))
 
     @staticmethod
     def _accel_derivable(out: dict[str, np.ndarray], commit: int) -> bool:
@@ -1045,7 +1096,7 @@ class _SegmentTable:
 
     def _store_accel(self) -> None:
         """From now on store the ramps' accelerations; the rows so far are derived."""
-        rows = self.cols["t_acc"].shape[0]
+        rows = len(self)
         for k, a in zip(self._ACCEL, self._accel(self.n), strict=True):
             self.cols[k] = aligned_array(rows)
             self.cols[k][: self.n] = a
@@ -1070,11 +1121,17 @@ class _SegmentTable:
         if self.v1 is None and not (
             _same_bits(v1[:-1], v0[1:]) and (n == 0 or _same_bits(cols["v0"][n : n + 1], v0[:1]))
         ):
-            self.v1 = np.empty(cols["t_acc"].shape[0])  # (never seen: the nodes are shared)
+            self.v1 = np.empty(len(self))  # (never seen: the nodes are shared)
             self.v1[:n] = cols["v0"][1 : n + 1]
         for k in _SEGMENT_KEYS:
             if k in cols:
                 cols[k][rows] = out[k][:commit]
+        if self.ramps:
+            duration, phase, general = Ramps.classify({k: out[k][:commit] for k in RAMP_COLUMNS}, v0, v1)
+            cols["duration"][rows], cols["phase"][rows] = duration, phase
+            at = np.flatnonzero(general)
+            if at.size:
+                self.general.append((n + at, np.stack([out[k][:commit][at] for k in RAMP_COLUMNS], axis=1)))
         if self.v1 is None:
             cols["v0"][n + commit] = v1[-1]
         else:
@@ -1097,21 +1154,26 @@ class _SegmentTable:
         mb = bucket_size(n)
         self._reserve(mb)
         cols = self.cols
-        for k in ("t_acc", "t_cru", "t_dec", "rest"):
+        for k in ("duration",) if self.ramps else ("t_acc", "t_cru", "t_dec"):
             cols[k][n:mb] = self._FILL[k]
-        times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
-        out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
-        del times
+        cols["rest"][n:mb] = True
+        if self.ramps:
+            out = jax.device_get(_align_total(cols["duration"][:mb], cols["rest"][:mb], tick_hz))
+        else:
+            times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
+            out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
+            del times
         first_segment = np.flatnonzero(cols["rest"][:n])
         groups = GroupTicks(first_segment, np.array(out.pop("g_start")[: first_segment.size]))  # (not a view of mb)
         columns = {"offset_ticks": np.asarray(out["offset_ticks"][:n])}
         columns.update({k: cols[k][:n] for k in _SEGMENT_KEYS + self._WHERE if k in cols and k != "v0"})
+        ramps = self._ramps(n) if self.ramps else None
         if self.v1 is None:
             columns["v_nodes"] = cols["v0"][: n + 1]
         else:
             columns["v0"], columns["v1"] = cols["v0"][:n], self.v1[:n]
         cuts = SegmentCuts.of(self.span_length, self.counts) if self.derived else None
-        return Plan(columns, int(out["n_ticks"]), tick_hz, cuts, groups)
+        return Plan(columns, int(out["n_ticks"]), tick_hz, cuts, groups, ramps)
 
 
 def _grid_rows(span_length: np.ndarray, counts: np.ndarray, first: int, last: int) -> tuple[np.ndarray, ...]:
