@@ -346,14 +346,13 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     if large:
         release_free_heap()  # the kernel's chunks and the rounds' arrays, before the trims and the spans' assembly
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
-    trimmed, arcs = _trim(spans, trim_start, trim_end)
+    trimmed, alive, arcs = _trim(spans, trim_start, trim_end)
     del trim_start, trim_end
-    alive = (trimmed["length"] > MIN_LENGTH_MM) | (trimmed["kind"] == SpanKind.POINT)
     # a blend's pieces before its second span, in order
     key = np.concatenate(
         [np.flatnonzero(alive).astype(np.float64), j[owner] + 0.5 * (1 + np.arange(owner.size) / (owner.size + 1))]
     )
-    return assemble([(trimmed, alive), (fields_, None)], key, arcs, merge_polys([spans.polys, table]))
+    return assemble([(trimmed, None), (fields_, None)], key, arcs, merge_polys([spans.polys, table]))
 
 
 def _blend_fields(
@@ -452,31 +451,39 @@ TRIM_BLOCK = 1 << 16
 PLACE_BLOCK = 1 << 16
 
 
-def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[dict[str, np.ndarray], ArcTable]:
-    """Span fields with lines and arcs cut back at their ends (``trim_start``/``trim_end`` mm), and the arcs."""
-    arrays = span_arrays(spans)
-    idx = np.arange(len(spans))
+def _trim(
+    spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray
+) -> tuple[dict[str, np.ndarray], np.ndarray, ArcTable]:
+    """The spans that remain once lines and arcs are cut back at their ends (``trim_start``/``trim_end`` mm): their
+    fields (copies of those rows alone: the spans the blends consume are not copied), the mask ``alive`` ``(n,)``
+    of the spans they are, and the arcs."""
     cut = (trim_start > 0) | (trim_end > 0)
-    changed = ("origin", "tangent_in", "tangent_out", "length", "lo", "hi")  # copied; the others as they are
-    out = {k: np.array(getattr(spans, k)) if k in changed else getattr(spans, k) for k in SPAN_FIELDS}
+    length = np.where(cut, spans.length - trim_start - trim_end, spans.length)
+    alive = (length > MIN_LENGTH_MM) | (spans.kind == SpanKind.POINT)
+    rows = np.flatnonzero(alive)
+    out = {k: getattr(spans, k)[rows] for k in SPAN_FIELDS if k != "length"}
+    out["length"] = length[rows]
+    del length
     if not cut.any():
-        return out, spans.arcs
-    c = np.flatnonzero(cut)
-    left = c[spans.length[c] - trim_start[c] - trim_end[c] > MIN_LENGTH_MM]  # not consumed: their new ends
+        return out, alive, spans.arcs
+    left = np.flatnonzero(cut[rows])  # rows of out (spans rows[left]) cut and not consumed: their new ends
+    arrays = span_arrays(spans)
     for a in range(0, left.size, TRIM_BLOCK):  # the evaluations' temporaries: a block's, not every span's
-        cb = left[a : a + TRIM_BLOCK]
-        q0, t0 = evaluate_path(arrays, idx[cb], trim_start[cb], 1)
-        _, t1 = evaluate_path(arrays, idx[cb], spans.length[cb] - trim_end[cb], 1)
-        out["origin"][cb] = q0
-        out["tangent_in"][cb] = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
-        out["tangent_out"][cb] = t1 / np.linalg.norm(t1, axis=1, keepdims=True)
-    out["length"][c] = spans.length[c] - trim_start[c] - trim_end[c]
-    line = left[spans.kind[left] == SpanKind.LINE]
+        lb = left[a : a + TRIM_BLOCK]
+        cb = rows[lb]
+        q0, t0 = evaluate_path(arrays, cb, trim_start[cb], 1)
+        _, t1 = evaluate_path(arrays, cb, spans.length[cb] - trim_end[cb], 1)
+        out["origin"][lb] = q0
+        out["tangent_in"][lb] = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
+        out["tangent_out"][lb] = t1 / np.linalg.norm(t1, axis=1, keepdims=True)
+    del arrays
+    line = left[out["kind"][left] == SpanKind.LINE]
     if line.size:
         end = out["origin"][line] + out["length"][line, None] * out["tangent_in"][line]
         out["lo"][line] = np.minimum(out["origin"][line], end)
         out["hi"][line] = np.maximum(out["origin"][line], end)
     arcs = spans.arcs
+    c = np.flatnonzero(cut)
     arc = c[spans.kind[c] == SpanKind.ARC]
     if arc.size:
         t = {f: np.array(getattr(arcs, f)) for f in ("center", "e1", "e2", "axis", "radius", "rise", "sweep")}
@@ -487,6 +494,6 @@ def _trim(spans: Spans, trim_start: np.ndarray, trim_end: np.ndarray) -> tuple[d
         t["e1"][it] = np.cos(psi0) * e1 + np.sin(psi0) * e2
         t["e2"][it] = -np.sin(psi0) * e1 + np.cos(psi0) * e2
         t["center"][it] = t["center"][it] + (t["rise"][it] * psi0[:, 0])[:, None] * t["axis"][it]
-        t["sweep"][it] = out["length"][arc] * omega
+        t["sweep"][it] = (spans.length[arc] - trim_start[arc] - trim_end[arc]) * omega
         arcs = ArcTable(**t)
-    return out, arcs
+    return out, alive, arcs
