@@ -44,7 +44,6 @@ from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
-from jaxcnc.memory import release_free_heap
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -163,9 +162,8 @@ def _blend_round(
     need: np.ndarray,
 ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """:func:`_blend_points` and :func:`_kernel` of the junctions after spans ``j``, ``KERNEL_CHUNK`` junctions at a
-    time: the points of all blends (144 MB at 1 M) and their evaluation's temporaries never exist at once (the
-    1 M-block contour's ``build_spans`` peaked at ~1.56-1.60 GB resident before, ~1.41 GB with the trims of
-    :func:`blend_path`). The values are those of the two calls over all junctions, bit for bit.
+    time: the points of all blends (144 MB at 1 M) and their evaluation's temporaries never exist at once. The values
+    are those of the two calls over all junctions, bit for bit.
 
     Returns the kernel's outputs for every blend, with the start points ``origin`` ``(J, 3)`` and the end
     tangents ``t0``, ``t1`` replaced by the spans' ``Ta``, ``Tb`` (which :func:`_blend_fields` puts at a whole
@@ -196,9 +194,6 @@ def _blend_round(
     return out, np.concatenate(kept), np.concatenate(kept_pts)
 
 
-#: Programs with at least this many blends hand the C heap's free pages back between the stages of building them
-#: (:func:`~jaxcnc.memory.release_free_heap`).
-TRIM_BLENDS = 1 << 18
 #: Blends measured by one call of the kernel.
 KERNEL_CHUNK = 1 << 16
 #: A harmless blend (a straight quintic) for the padding rows of :func:`_kernel`.
@@ -290,9 +285,6 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
     if j.size == 0:
         return spans
-    large = j.size >= TRIM_BLENDS
-    if large:
-        release_free_heap()  # what building the rows' spans freed: the blends' arrays start lean
     half = 0.5 * spans.length
     ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
@@ -324,8 +316,6 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         k_mid[frozen] = 0.0
         changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
         other = np.flatnonzero(changed & ~lines)  # arcs take part: measure against the arc itself
-        if large:
-            release_free_heap()  # the last round's outputs and the junctions' temporaries
         found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, changed & ~lines)
         dev = found["dev"].copy()
         if other.size:
@@ -343,8 +333,6 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     del k_mid, corner, frozen, dev, changed
     fields_, table, owner = _blend_fields(spans, j, found, kept, kept_pts)
     del found, kept, kept_pts  # the blends' fields hold what is kept of them
-    if large:
-        release_free_heap()  # the kernel's chunks and the rounds' arrays, before the trims and the spans' assembly
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
     trimmed, alive, arcs = _trim(spans, trim_start, trim_end)
     del trim_start, trim_end

@@ -110,11 +110,11 @@ class Ramps:
         vp, t_acc, t_cru, t_dec = (cols[k] for k in RAMP_COLUMNS)
         duration = t_acc + t_cru + t_dec
         zero = {k: cols[k].view(np.int64) == 0 for k in RAMP_COLUMNS[1:]}  # +0.0 (not -0.0)
-        acc = zero["t_cru"] & zero["t_dec"] & _bits_equal(vp, v1) & _bits_equal(duration, t_acc)
-        dec = zero["t_acc"] & zero["t_cru"] & _bits_equal(vp, v0) & _bits_equal(duration, t_dec)
-        cruise = zero["t_acc"] & zero["t_dec"] & _bits_equal(vp, v0) & _bits_equal(vp, v1)
-        cruise &= _bits_equal(duration, t_cru)
-        phase = np.select([acc, dec, cruise], [RAMP_ACC, RAMP_DEC, RAMP_CRUISE], RAMP_GENERAL).astype(np.int8)
+        at_v0, at_v1 = _bits_equal(vp, v0), _bits_equal(vp, v1)
+        phase = np.full(vp.shape[0], RAMP_GENERAL, np.int8)  # then each kind, the first listed last (it wins)
+        phase[zero["t_acc"] & zero["t_dec"] & at_v0 & at_v1 & _bits_equal(duration, t_cru)] = RAMP_CRUISE
+        phase[zero["t_acc"] & zero["t_cru"] & at_v0 & _bits_equal(duration, t_dec)] = RAMP_DEC
+        phase[zero["t_cru"] & zero["t_dec"] & at_v1 & _bits_equal(duration, t_acc)] = RAMP_ACC
         return duration, phase, phase == RAMP_GENERAL
 
     def rows(self, k0: int, k1: int, v0: np.ndarray, v1: np.ndarray) -> dict[str, np.ndarray]:
