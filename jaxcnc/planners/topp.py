@@ -976,7 +976,7 @@ class _SegmentTable:
 
     In the same large plans the trapezoids are kept as :class:`~.timelaw.Ramps` (a duration and which ramp, for the
     92 % of a fine grid's segments that are one ramp or cruise; the others whole), and the groups' first ticks once
-    (:class:`~.timelaw.GroupTicks`). A 1 M-block blended contour's plan (5.2 M segments): 579 -> ~150 MB.
+    (:class:`~.timelaw.GroupTicks`). A 1 M-block blended contour's plan (5.2 M segments): 579 -> 167 MB.
     """
 
     _FILL = dict.fromkeys(_SEGMENT_KEYS, 0.0) | {
