@@ -4,6 +4,7 @@ distance to the pieces it replaces (hypothesis, random junctions, dense referenc
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -54,32 +55,48 @@ junctions = st.tuples(
 @settings(max_examples=15, deadline=None)
 @given(st.lists(junctions, min_size=1, max_size=4))
 def test_the_deviation_bound_is_never_below_the_dense_distance(cases):
-    for line_first, length, radius, sweep, ccw, kink, share in cases:
-        g = "G2" if not ccw else "G3"
-        if line_first:  # along +X into the origin, then the arc leaving at angle `kink`
-            end, center = _arc_start_at_origin(radius, sweep, ccw, kink)
-            arc = f"{g} X{end[0]:.9f} Y{end[1]:.9f} I{center[0]:.9f} J{center[1]:.9f}"
-            text = f"G0 X{-length:.9f} Y0\nG1 X0 Y0 F600\n{arc}\n"
-        else:  # the arc into the origin at angle `kink`, then along +X
-            start, center = _arc_end_at_origin(radius, sweep, ccw, kink)
-            i, j = center - start
-            text = f"G0 X{start[0]:.9f} Y{start[1]:.9f}\n{g} X0 Y0 I{i:.9f} J{j:.9f} F600\nG1 X{length:.9f} Y0\n"
-        spans = program_spans(parse_gcode(text, "j.ngc"))
-        k = np.array([len(spans) - 2])
-        ell = share * 0.5 * np.minimum(spans.length[k], spans.length[k + 1])
-        pts, _, _ = B._blend_points(spans, k, ell, ell)
-        coeffs = B._coeffs(pts)
-        bound = B._deviation(spans, k, ell, ell, coeffs)[0]
-        # dense reference: the blend at 801 points against 1501-point polylines of the two pieces (on an arc
-        # the chords lie inside it by at most δ²/8R: the slack allowed)
-        u = np.linspace(0.0, 1.0, 801)[None]
-        p = poly.bezier_derivatives(coeffs, u, 0)[0][0] + pts[0, 0]
-        arrays = span_arrays(spans)
-        s_in = np.linspace(spans.length[k[0]] - ell[0], spans.length[k[0]], 1501)
-        s_out = np.linspace(0.0, ell[0], 1501)
-        ref_in = evaluate_path(arrays, np.full(s_in.size, k[0]), s_in)[0]
-        ref_out = evaluate_path(arrays, np.full(s_out.size, k[0] + 1), s_out)[0]
-        dense = np.max(np.minimum(_polyline_distance(p, ref_in), _polyline_distance(p, ref_out)))
-        sagitta = (ell[0] / 1500) ** 2 / (8 * radius)
-        assert bound >= dense - sagitta - 1e-12, (text, bound, dense)
-        assert bound <= 1.25 * dense + 1e-9, (text, bound, dense)  # and a useful bound, not a loose one
+    for case in cases:
+        _check_case(*case)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known gap, found by the property test above on 2026-11-28 (7126979 fails it too): the distances to the "
+    "two pieces cross five times along this blend (u = 0.062, 0.064, 0.657, 0.874, 0.884) and the kernel measures "
+    "the crossing of the first sample interval where the nearer piece changes only; the peak is at the third "
+    "(0.1675 mm, bound 0.1458). A 111-degree cut-back on a 1 mm arc: long blends on tight arcs",
+)
+def test_known_gap_a_long_cut_back_on_a_tight_arc():
+    _check_case(False, 5.0, 1.0, 4.03125, True, -2.2890625, 0.96875)
+
+
+def _check_case(line_first, length, radius, sweep, ccw, kink, share) -> None:
+    """The deviation bound of one junction against the dense reference (see the property test)."""
+    g = "G2" if not ccw else "G3"
+    if line_first:  # along +X into the origin, then the arc leaving at angle `kink`
+        end, center = _arc_start_at_origin(radius, sweep, ccw, kink)
+        arc = f"{g} X{end[0]:.9f} Y{end[1]:.9f} I{center[0]:.9f} J{center[1]:.9f}"
+        text = f"G0 X{-length:.9f} Y0\nG1 X0 Y0 F600\n{arc}\n"
+    else:  # the arc into the origin at angle `kink`, then along +X
+        start, center = _arc_end_at_origin(radius, sweep, ccw, kink)
+        i, j = center - start
+        text = f"G0 X{start[0]:.9f} Y{start[1]:.9f}\n{g} X0 Y0 I{i:.9f} J{j:.9f} F600\nG1 X{length:.9f} Y0\n"
+    spans = program_spans(parse_gcode(text, "j.ngc"))
+    k = np.array([len(spans) - 2])
+    ell = share * 0.5 * np.minimum(spans.length[k], spans.length[k + 1])
+    pts, _, _ = B._blend_points(spans, k, ell, ell)
+    coeffs = B._coeffs(pts)
+    bound = B._deviation(spans, k, ell, ell, coeffs)[0]
+    # dense reference: the blend at 801 points against 1501-point polylines of the two pieces (on an arc
+    # the chords lie inside it by at most δ²/8R: the slack allowed)
+    u = np.linspace(0.0, 1.0, 801)[None]
+    p = poly.bezier_derivatives(coeffs, u, 0)[0][0] + pts[0, 0]
+    arrays = span_arrays(spans)
+    s_in = np.linspace(spans.length[k[0]] - ell[0], spans.length[k[0]], 1501)
+    s_out = np.linspace(0.0, ell[0], 1501)
+    ref_in = evaluate_path(arrays, np.full(s_in.size, k[0]), s_in)[0]
+    ref_out = evaluate_path(arrays, np.full(s_out.size, k[0] + 1), s_out)[0]
+    dense = np.max(np.minimum(_polyline_distance(p, ref_in), _polyline_distance(p, ref_out)))
+    sagitta = (ell[0] / 1500) ** 2 / (8 * radius)
+    assert bound >= dense - sagitta - 1e-12, (text, bound, dense)
+    assert bound <= 1.25 * dense + 1e-9, (text, bound, dense)  # and a useful bound, not a loose one

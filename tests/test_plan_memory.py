@@ -382,3 +382,28 @@ def test_ramps_keep_the_trapezoids_bit_for_bit(monkeypatch, corner_tol):
             got = ramps.rows(k0, k1, (f,))[f]
             np.testing.assert_array_equal(_bits(got), _bits(getattr(columns, f)[k0:k1]), err_msg=f"{f} {k0}:{k1}")
     np.testing.assert_array_equal(_bits(ramps.duration_s), _bits(columns.duration_s))
+
+
+def test_blends_keep_no_weight_column_and_join_rational_tables_whole():
+    """The blends' poly table holds ``(q, 6, 3)`` coefficients (their weight is 1); joined with rational pieces it
+    becomes homogeneous, the blends' rows with the weight 1; evaluated, either form gives the same bits."""
+    from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+    from jaxcnc.geometry.spans import PolyTable, merge_polys
+
+    spans = build_spans(cam_polyline(600), 0.01)
+    polys = spans.polys
+    assert len(polys) and not polys.rational and polys.coeffs.shape[1:] == (6, 3)
+    hom = polys.homogeneous()
+    assert hom.shape[1:] == (6, 4)
+    np.testing.assert_array_equal(hom[..., :3], polys.coeffs)
+    np.testing.assert_array_equal(hom[..., 3], np.broadcast_to(np.eye(6)[0], (len(polys), 6)))
+    rational = PolyTable(coeffs=hom[:5] * 2.0, timing=polys.timing[:5], length_err=polys.length_err[:5])  # weight 2
+    joined = merge_polys([rational, polys])
+    assert joined.rational
+    np.testing.assert_array_equal(joined.coeffs[5:], hom)
+    whole = dataclasses.replace(spans, polys=PolyTable(hom, polys.timing, polys.length_err))
+    blend = np.flatnonzero(spans.kind == SpanKind.BLEND)
+    s = spans.length[blend] * 0.61
+    got, want = (evaluate_path(span_arrays(sp), blend, s, 2) for sp in (spans, whole))
+    for a, b in zip(got, want, strict=True):
+        assert np.array_equal(a, b)

@@ -81,7 +81,8 @@ def _compiled(fn):
 def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray]:
     """Fields of blends with control points ``pts`` ``(J, 6, 3)`` (absolute mm) at corners ``(J, 3)``.
 
-    Returns a dict of arrays: ``coeffs`` ``(J, 6, 4)`` (homogeneous power basis relative to ``P0``),
+    Returns a dict of arrays: ``coeffs`` ``(J, 6, 3)`` (power basis relative to ``P0``; a blend's weight is 1, so
+    its poly table keeps no weight column: :class:`~jaxcnc.geometry.spans.PolyTable`),
     ``length``, ``timing`` ``(J, 6)``, ``err``, ``d1_max``, ``d2_max``, ``kappa_max`` (at ``N_CHECK``
     points), ``lo``, ``hi`` ``(J, 3)`` (hull), ``t0``, ``t1`` (unit end tangents) and ``dev``: the
     largest distance from the blend to the segments ``P0``–corner and corner–``P5`` (sampled at the
@@ -151,9 +152,8 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
     h = float(np.max(np.diff(np.concatenate([[0.0], _GX, [1.0]]))))
     t0 = p1_0 / jnp.linalg.norm(p1_0, axis=1, keepdims=True)
     t1 = p1_1 / jnp.linalg.norm(p1_1, axis=1, keepdims=True)
-    coeffs = jnp.concatenate([c, jnp.zeros_like(c[..., :1])], axis=2).at[:, 0, 3].set(1.0)
     return {
-        "coeffs": coeffs,
+        "coeffs": c,
         "length": length,
         "timing": timing,
         "err": err,

@@ -55,7 +55,7 @@ def span_arrays(spans, xp: ModuleType = np) -> dict:
         "arc_axis": col(arcs.axis),
         "arc_radius": put(arcs.radius),
         "arc_rise": put(arcs.rise),
-        "poly_coeffs": col(polys.coeffs),  # (p+1, 4, q)
+        "poly_coeffs": put(_poly_columns(np.moveaxis(polys.coeffs, 0, -1))),  # (p+1, 4, q)
         "poly_timing": col(polys.timing),  # (6, q)
     }
 
@@ -109,9 +109,17 @@ def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int 
         n_arc_rows, n_poly_rows = (table_rows if len(arcs) else 0), (table_rows if len(polys) else 0)
     for name in ("center", "e1", "e2", "axis", "radius", "rise"):
         arrays[f"arc_{name}"] = col(getattr(arcs, name), arc_rows, n_arc_rows, arc_pad[name])
-    arrays["poly_coeffs"] = col(polys.coeffs, poly_rows, n_poly_rows, poly_pad["coeffs"])
+    arrays["poly_coeffs"] = _poly_columns(col(polys.coeffs, poly_rows, n_poly_rows, poly_pad["coeffs"]))
     arrays["poly_timing"] = col(polys.timing, poly_rows, n_poly_rows, poly_pad["timing"])
     return {k: jax.device_put(v) for k, v in arrays.items()}
+
+
+def _poly_columns(c: np.ndarray) -> np.ndarray:
+    """Poly coefficients in column layout ``(p+1, 4, q)`` from ``(p+1, 4, q)`` or polynomial ``(p+1, 3, q)`` ones
+    (the weight 1 added: what the evaluation reads), contiguous."""
+    from jaxcnc.geometry.spans import with_unit_weight
+
+    return np.ascontiguousarray(c if c.shape[1] == 4 else with_unit_weight(c, axis=1))
 
 
 def _horner(c, x, order: int, xp):

@@ -63,7 +63,9 @@ class PolyTable:
     """Rational Bézier pieces (NURBS pieces and blends), one row each (``q`` rows).
 
     Attributes:
-        coeffs: ``(q, p+1, 4)`` homogeneous power-basis coefficients relative to the span's origin.
+        coeffs: ``(q, p+1, 4)`` homogeneous power-basis coefficients relative to the span's origin, or ``(q, p+1, 3)``
+            where every piece is a polynomial (weight 1: the corner blends) — the weight column left out (a million
+            blends: 48 MB less). :meth:`homogeneous` gives the ``(q, p+1, 4)`` form either way.
         timing: ``(q, 6)`` power-basis coefficients of the timing polynomial ``u = V(s / length)``.
         length_err: ``(q,)`` mm, bound on the error of the span's arc length.
     """
@@ -78,6 +80,27 @@ class PolyTable:
     @property
     def degree(self) -> int:
         return int(self.coeffs.shape[1] - 1)
+
+    @property
+    def rational(self) -> bool:
+        """The coefficients hold a weight column (``(q, p+1, 4)``)."""
+        return int(self.coeffs.shape[2]) == 4
+
+    def homogeneous(self) -> np.ndarray:
+        """``(q, p+1, 4)`` homogeneous coefficients (made, with the weight 1, where the table holds polynomials)."""
+        return self.coeffs if self.rational else with_unit_weight(self.coeffs)
+
+
+def with_unit_weight(coeffs: np.ndarray, axis: int = 2) -> np.ndarray:
+    """Polynomial power-basis coefficients (``3`` coordinates on ``axis``, powers on the axis before it) with the
+    weight ``1`` (power-basis coefficients ``1, 0, 0, ...``) as a fourth coordinate."""
+    shape = list(coeffs.shape)
+    shape[axis] = 1
+    weight = np.zeros(shape)
+    first = [slice(None)] * coeffs.ndim
+    first[axis - 1] = 0
+    weight[tuple(first)] = 1.0
+    return np.concatenate([coeffs, weight], axis=axis)
 
 
 @dataclass(frozen=True, eq=False)
@@ -331,8 +354,9 @@ def merge_polys(tables: list[PolyTable]) -> PolyTable:
     if len(tables) == 1 and tables[0].degree in DEGREE_BUCKETS:
         return tables[0]  # nothing to join or elevate: no copy
     degree = next(d for d in DEGREE_BUCKETS if d >= max(t.degree for t in tables))
+    rational = any(t.rational for t in tables)  # polynomial tables keep their three columns among their own kind
     return PolyTable(
-        coeffs=np.concatenate([elevate(t.coeffs, degree) for t in tables]),
+        coeffs=np.concatenate([elevate(t.homogeneous() if rational else t.coeffs, degree) for t in tables]),
         timing=np.concatenate([t.timing for t in tables]),
         length_err=np.concatenate([t.length_err for t in tables]),
     )
@@ -487,11 +511,13 @@ def _own_tables(spans: Spans, out: dict[str, np.ndarray]) -> Spans:
 
 def pad_table_rows(coeff_shape: tuple[int, ...]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """The rows :func:`pad_tables` appends (no span refers to them): an arc table's (a unit circle) and a poly
-    table's with coefficients ``coeff_shape`` ``(p+1, 4)`` (a straight polynomial, weight 1), field by field."""
+    table's with coefficients ``coeff_shape`` ``(p+1, 4)`` or ``(p+1, 3)`` (a straight polynomial, weight 1), field by
+    field."""
     unit = dict(center=(0, 0, 0), e1=(1, 0, 0), e2=(0, 1, 0), axis=(0, 0, 1), radius=1, rise=0, sweep=1)
     arc = {name: np.asarray(v, np.float64) for name, v in unit.items()}
     line = np.zeros(coeff_shape)
-    line[0, 3] = 1.0  # weight 1
+    if coeff_shape[-1] == 4:
+        line[0, 3] = 1.0  # weight 1
     if line.shape[0] > 1:
         line[1, 0] = 1.0  # x = u
     timing = np.zeros(6)
