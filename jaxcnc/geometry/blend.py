@@ -315,8 +315,9 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         k_mid = _chain_curvature(spans, j, ell_a, ell_b)
         k_mid[frozen] = 0.0
         changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
-        other = np.flatnonzero(changed & ~lines)  # arcs take part: measure against the arc itself
-        found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, changed & ~lines)
+        with_arc = changed & ~lines  # arcs take part: measure against the arc itself
+        other = np.flatnonzero(with_arc)
+        found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, with_arc)
         dev = found["dev"].copy()
         if other.size:
             pts = kept_pts[np.searchsorted(kept, other)]
@@ -451,7 +452,6 @@ def _trim(
     rows = np.flatnonzero(alive)
     out = {k: getattr(spans, k)[rows] for k in SPAN_FIELDS if k != "length"}
     out["length"] = length[rows]
-    del length
     if not cut.any():
         return out, alive, spans.arcs
     left = np.flatnonzero(cut[rows])  # rows of out (spans rows[left]) cut and not consumed: their new ends
@@ -482,6 +482,6 @@ def _trim(
         t["e1"][it] = np.cos(psi0) * e1 + np.sin(psi0) * e2
         t["e2"][it] = -np.sin(psi0) * e1 + np.cos(psi0) * e2
         t["center"][it] = t["center"][it] + (t["rise"][it] * psi0[:, 0])[:, None] * t["axis"][it]
-        t["sweep"][it] = (spans.length[arc] - trim_start[arc] - trim_end[arc]) * omega
+        t["sweep"][it] = length[arc] * omega
         arcs = ArcTable(**t)
     return out, alive, arcs

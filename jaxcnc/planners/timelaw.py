@@ -243,7 +243,8 @@ class Plan(TimeLaw):
             return self._ramp_rows(k0, k1)[name]
         if name in ("a_acc", "a_dec"):
             v, t = ("v0", "t_acc") if name == "a_acc" else ("v1", "t_dec")
-            return ramp_accel(self.column("vp", k0, k1), self.column(v, k0, k1), self.column(t, k0, k1))
+            trap = self._ramp_rows(k0, k1) if self.ramps is not None else {k: cols[k][k0:k1] for k in ("vp", t)}
+            return ramp_accel(trap["vp"], self.column(v, k0, k1), trap[t])
         if name in ("span", "s_start", "length") and self.cuts is not None:
             return self.cuts.rows(k0, k1)[("span", "s_start", "length").index(name)]
         if name in ("group_tick", "first_tick") and self.groups is not None:

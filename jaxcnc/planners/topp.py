@@ -398,7 +398,7 @@ def _junction_program():
 def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
     """:func:`~jaxcnc.planners.timelaw.align_to_ticks`, returning only what it adds to the segments."""
     out = align_to_ticks(prof, rest_start, tick_hz)
-    return {k: out[k] for k in ("g_start", "offset_ticks", "n_ticks")}
+    return {k: out[k] for k in _ALIGN_KEYS}
 
 
 @cached_jit
@@ -407,7 +407,11 @@ def _align_total(duration: jnp.ndarray, rest_start: jnp.ndarray, tick_hz) -> dic
     alignment sums them: the same ticks and offsets, bit for bit)."""
     zero = jnp.zeros_like(duration)
     out = align_to_ticks({"t_acc": duration, "t_cru": zero, "t_dec": zero}, rest_start, tick_hz)
-    return {k: out[k] for k in ("g_start", "offset_ticks", "n_ticks")}
+    return {k: out[k] for k in _ALIGN_KEYS}
+
+
+#: What the alignment adds that a plan of the grid keeps: the groups' first ticks, the offsets and the ticks in all.
+_ALIGN_KEYS = ("g_start", "offset_ticks", "n_ticks")
 
 
 def interior_excess(
