@@ -178,18 +178,8 @@ def _segment_distance_cols(p: list[jnp.ndarray], a: jnp.ndarray, b: jnp.ndarray)
     return jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
-def _segment_distance(p: jnp.ndarray, a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
-    """Distance from points ``p`` ``(J, Q, 3)`` to segments ``a``–``b`` ``(J, 3)``."""
-    ab = b - a
-    den = jnp.maximum(jnp.sum(ab * ab, axis=1), 1e-300)[:, None]
-    t = jnp.clip(jnp.sum((p - a[:, None]) * ab[:, None], axis=2) / den, 0.0, 1.0)
-    return jnp.linalg.norm(p - (a[:, None] + t[..., None] * ab[:, None]), axis=2)
-
-
 #: Points of a blend where its distance to the replaced pieces is sampled (:func:`deviation_kernel`).
-N_DEVIATION = 17
-#: Bisection steps for the point where the nearer of the two pieces changes.
-CROSS_BISECTIONS = 20
+N_DEVIATION = 33
 
 
 def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
@@ -201,64 +191,105 @@ def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, pi
     (the part's ends, ``(J, 3)``), ``is_arc`` (bool), and for arcs ``center``, ``e1``, ``e2``, ``axis``
     ``(J, 3)``, ``radius``, ``rise``, ``lo``, ``hi`` (the part's angles) — zeros where ``is_arc`` is false.
 
-    ``min(d_in, d_out)`` is smooth where one piece is the nearer — between samples ``h`` apart it rises
-    above them by at most ``max|P''| h²/8`` — and peaks where the two are equal: there the crossing
-    is found by bisection between the samples that bracket it and measured.
+    The bound holds between the ``N_DEVIATION`` samples too, however often the nearer piece changes
+    (:func:`interval_bound`).
     """
     return _compiled(_deviation_kernel)(coeffs, start, piece_in, piece_out)
 
 
-def _piece_distance(p: jnp.ndarray, pc: dict) -> jnp.ndarray:
-    """Distance from ``p`` ``(J, Q, 3)`` to the parts ``pc`` (:func:`deviation_kernel`).
+def interval_bound(f: jnp.ndarray, g: jnp.ndarray, excess_f, excess_g, chord_err) -> jnp.ndarray:
+    """``(J,)`` upper bound of ``max min(f(u), g(u))`` over a blend from samples ``f``, ``g`` ``(J, Q)``.
+
+    Between two samples ``u_k``, ``u_k+1`` the blend ``P`` strays from its chord ``Q`` by at most
+    ``chord_err`` (``(J, 1)`` or ``(J, Q-1)``: ``max|P''| h²/8``), and a distance is 1-Lipschitz, so
+    ``f(P(u)) <= f(Q(u)) + chord_err``. Along the straight chord the distance to a segment is convex
+    (below the line through its two samples); the distance to an arc from inside it is not, but
+    rises above that line by at most ``excess`` (``(J, Q-1)``, or 0; see :func:`_arc_excess`). So on
+    each interval ``min(f, g)`` lies below the lower of two straight lines, each raised by its
+    excess, plus ``chord_err``; the maximum of that minimum is at an end, or where the two lines cross
+    inside the interval. No single crossing is assumed: the nearer piece may change in any interval.
+    """
+    f0, f1 = f[:, :-1] + excess_f, f[:, 1:] + excess_f
+    g0, g1 = g[:, :-1] + excess_g, g[:, 1:] + excess_g
+    ends = jnp.maximum(jnp.minimum(f0, g0), jnp.minimum(f1, g1))
+    d0, d1 = f0 - g0, f1 - g1
+    crosses = d0 * d1 < 0  # the lines cross strictly inside: there they are equal, and min(f, g) peaks
+    s = jnp.where(crosses, d0 / jnp.where(crosses, d0 - d1, 1.0), 0.0)
+    at_cross = jnp.where(crosses, f0 + (f1 - f0) * s, ends)
+    return jnp.max(jnp.maximum(ends, at_cross) + chord_err, axis=1)
+
+
+def _arc_excess(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
+    """``(J, Q-1)`` how far the distance to the arc parts ``pc`` rises above the line through its values
+    at consecutive points ``p`` (three ``(J, Q)`` columns) along the chord between them (0 on lines).
+
+    Outside a circle the distance ``ρ - r`` (``ρ``: distance from the centre in the arc's plane) is
+    convex along a straight chord; inside, ``r - ρ`` bends down by ``ρ'' <= |Q'|²/ρ``, so over a chord
+    of length ``δ`` it rises above its end values' line by at most ``δ²/(8 ρ_min)``, ``ρ_min`` the
+    chord's nearest approach to the centre. Past the part's ends the distance is to an end point:
+    convex. (A helix's parts rise a little: treated as their circle.)
+    """
+    rel = [p[i] - pc["center"][:, i, None] for i in range(3)]
+    x = sum(rel[i] * pc["e1"][:, i, None] for i in range(3))
+    y = sum(rel[i] * pc["e2"][:, i, None] for i in range(3))
+    x0, y0, dx, dy = x[:, :-1], y[:, :-1], x[:, 1:] - x[:, :-1], y[:, 1:] - y[:, :-1]
+    t = jnp.clip(-(x0 * dx + y0 * dy) / jnp.maximum(dx * dx + dy * dy, 1e-300), 0.0, 1.0)
+    rho_min = jnp.sqrt((x0 + t * dx) ** 2 + (y0 + t * dy) ** 2)
+    delta2 = sum((p[i][:, 1:] - p[i][:, :-1]) ** 2 for i in range(3))
+    inside = rho_min < pc["radius"][:, None]
+    excess = jnp.where(inside, delta2 / (8 * jnp.maximum(rho_min, 1e-300)), 0.0)
+    return jnp.where(pc["is_arc"][:, None], excess, 0.0)
+
+
+def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
+    """Distance ``(J, Q)`` from points ``p`` (three ``(J, Q)`` columns) to the parts ``pc``
+    (:func:`deviation_kernel`).
 
     On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
     on a circle; an upper bound on a helix, whose tiny parts barely rise).
     """
-    seg = _segment_distance(p, pc["a"], pc["b"])
-    rel = p - pc["center"][:, None]
-    phi = jnp.arctan2(jnp.sum(rel * pc["e2"][:, None], axis=2), jnp.sum(rel * pc["e1"][:, None], axis=2))
+    seg = _segment_distance_cols(p, pc["a"], pc["b"])
+    rel = [p[i] - pc["center"][:, i, None] for i in range(3)]
+    phi = jnp.arctan2(
+        sum(rel[i] * pc["e2"][:, i, None] for i in range(3)), sum(rel[i] * pc["e1"][:, i, None] for i in range(3))
+    )
     lo, hi = pc["lo"][:, None], pc["hi"][:, None]
     mid = (lo + hi) / 2
     psi = jnp.clip(mid + jnp.mod(phi - mid + jnp.pi, 2 * jnp.pi) - jnp.pi, lo, hi)
-    q = pc["center"][:, None] + pc["radius"][:, None, None] * (
-        jnp.cos(psi)[..., None] * pc["e1"][:, None] + jnp.sin(psi)[..., None] * pc["e2"][:, None]
-    )
-    q = q + (pc["rise"][:, None] * psi)[..., None] * pc["axis"][:, None]
-    return jnp.where(pc["is_arc"][:, None], jnp.linalg.norm(p - q, axis=2), seg)
+    cos, sin = jnp.cos(psi), jnp.sin(psi)
+    r = pc["radius"][:, None]
+    d = [
+        p[i]
+        - (pc["center"][:, i, None] + r * (cos * pc["e1"][:, i, None] + sin * pc["e2"][:, i, None]))
+        - pc["rise"][:, None] * psi * pc["axis"][:, i, None]
+        for i in range(3)
+    ]
+    return jnp.where(pc["is_arc"][:, None], jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), seg)
+
+
+def second_derivative_bound(cx: list[list[jnp.ndarray]]) -> jnp.ndarray:
+    """``(J,)`` ``max |P''|`` over ``[0, 1]`` of quintics with power-basis coefficients ``cx[i][k]`` ``(J, ...)``.
+
+    ``P''`` is the cubic ``2 c2 + 6 c3 u + 12 c4 u² + 20 c5 u³``; in Bernstein form its values are
+    convex combinations of its four Bernstein coefficients, so the largest of their norms bounds it
+    (not a sample: a bound).
+    """
+    a = [[2 * c[2], 6 * c[3], 12 * c[4], 20 * c[5]] for c in cx]
+    b = [[ai[0], ai[0] + ai[1] / 3, ai[0] + 2 * ai[1] / 3 + ai[2] / 3, ai[0] + ai[1] + ai[2] + ai[3]] for ai in a]
+    return jnp.max(jnp.stack([jnp.sqrt(b[0][m] ** 2 + b[1][m] ** 2 + b[2][m] ** 2) for m in range(4)]), axis=0)
 
 
 def _deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
     """:func:`deviation_kernel` before compilation."""
     cx = [[coeffs[:, k, i][:, None] for k in range(6)] for i in range(3)]
-
-    def dist(u: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-        p = jnp.stack([_horner(cx[i], u, 0)[0] for i in range(3)], axis=2) + start[:, None]
-        return _piece_distance(p, piece_in), _piece_distance(p, piece_out)
-
-    j = coeffs.shape[0]
-    grid = np.linspace(0.0, 1.0, N_DEVIATION)
-    u = jnp.broadcast_to(jnp.asarray(grid), (j, N_DEVIATION))
-    d_in, d_out = dist(u)
-    d2 = jnp.stack([_horner(cx[i], u, 2)[2] for i in range(3)], axis=2)
+    u = jnp.asarray(np.linspace(0.0, 1.0, N_DEVIATION))[None, :]
+    p = [_horner(cx[i], u, 0)[0] + start[:, i, None] for i in range(3)]
     h = 1.0 / (N_DEVIATION - 1)
-    smooth = jnp.max(jnp.minimum(d_in, d_out), axis=1) + jnp.max(jnp.linalg.norm(d2, axis=2), axis=1) * h * h / 8
-    # the crossing: the first sample interval where the nearer piece changes (one per blend)
-    side = d_in < d_out
-    change = side[:, :-1] != side[:, 1:]
-    has = jnp.any(change, axis=1)
-    k = jnp.argmax(change, axis=1)
-    lo, hi = jnp.asarray(grid)[k], jnp.asarray(grid)[k + 1]
-    lo_side = jnp.take_along_axis(side, k[:, None], axis=1)[:, 0]
-
-    def halve(_, bounds):
-        lo, hi = bounds
-        mid = (lo + hi) / 2
-        a, b = dist(mid[:, None])
-        same = (a[:, 0] < b[:, 0]) == lo_side
-        return jnp.where(same, mid, lo), jnp.where(same, hi, mid)
-
-    # 2^-20 of the blend's parameter: max(d_in, d_out) there overestimates the peak by less
-    lo, hi = jax.lax.fori_loop(0, CROSS_BISECTIONS, halve, (lo, hi))
-    a, b = dist(((lo + hi) / 2)[:, None])
-    crossing = jnp.where(has, jnp.maximum(a[:, 0], b[:, 0]), 0.0)
-    return jnp.maximum(smooth, crossing)
+    chord_err = second_derivative_bound(cx) * h * h / 8  # (J, 1)
+    return interval_bound(
+        _piece_distance(p, piece_in),
+        _piece_distance(p, piece_out),
+        _arc_excess(p, piece_in),
+        _arc_excess(p, piece_out),
+        chord_err,
+    )
