@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from jaxcnc.gcode import parse_gcode
 from jaxcnc.geometry import blend as B
+from jaxcnc.geometry import blend_kernel as K
 from jaxcnc.geometry import poly
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.spans import program_spans
@@ -103,3 +104,70 @@ def _check_case(line_first, length, radius, sweep, ccw, kink, share) -> None:
     sagitta = (ell[0] / 1500) ** 2 / (8 * radius)
     assert bound >= dense - sagitta - 1e-12, (text, bound, dense)
     assert bound <= 1.25 * dense + 1e-9, (text, bound, dense)  # and a useful bound, not a loose one
+
+
+def _dense_line_distance(pts: np.ndarray, corner: np.ndarray) -> float:
+    """Distance from the quintic Bézier ``pts`` ``(6, 3)`` (20,001 points) to the polyline ``P0``–corner–``P5``."""
+    u = np.linspace(0.0, 1.0, 20001)[:, None]
+    coeffs = np.einsum("ki,id->kd", K._M5, pts - pts[0])
+    p = sum(coeffs[k] * u**k for k in range(6)) + pts[0]
+    return float(np.max(_polyline_distance(p, np.stack([pts[0], corner, pts[5]]))))
+
+
+def _corner_blend(turn_deg, a, b, ka, kb):
+    """Control points of a blend as ``blend._blend_points`` makes them: from ``a`` mm before a corner at the
+    origin to ``b`` mm after it (the path turns by ``turn_deg`` in XY), with curvature vectors ``ka``, ``kb`` at
+    its ends (as a chain of blends gives them: any direction, in the plane and out of it; in units of the
+    corner's mean curvature ``2 sin(θ/2) / (a + b)``)."""
+    t_in = np.array([1.0, 0.0, 0.0])
+    th = np.deg2rad(turn_deg)
+    t_out = np.array([np.cos(th), np.sin(th), 0.0])
+    lam = a + b
+    kappa = 2 * abs(np.sin(th / 2)) / lam
+    p0, p5 = -a * t_in, b * t_out
+    p1, p4 = p0 + lam / 5 * t_in, p5 - lam / 5 * t_out
+    p2 = 2 * p1 - p0 + lam**2 / 20 * kappa * np.asarray(ka)
+    p3 = 2 * p4 - p5 + lam**2 / 20 * kappa * np.asarray(kb)
+    return np.stack([p0, p1, p2, p3, p4, p5]), np.zeros(3)
+
+
+line_blends = st.tuples(
+    st.floats(0.5, 150.0) | st.floats(-150.0, -0.5),
+    st.floats(0.01, 5.0),
+    st.floats(0.01, 5.0),
+    st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3),
+    st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3),
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(line_blends, min_size=1, max_size=8))
+def test_the_line_blend_bound_is_never_below_the_dense_distance(cases):
+    """The corner kernel's distance (where it certifies the crossing) and, where it cannot, the deviation
+    kernel's (the caller's fallback) against 20,001 points of the blend — asymmetric blends with inner points
+    pushed off the legs, in and out of the plane, as chained blends are."""
+    pts, corner = (np.stack(x) for x in zip(*(_corner_blend(*c) for c in cases), strict=True))
+    dev = np.asarray(K.blend_kernel(pts, corner)["dev"])
+    lines = {k: np.zeros((len(pts), 3)) for k in ("center", "e1", "e2", "axis")}
+    lines.update({k: np.zeros(len(pts)) for k in ("radius", "rise", "lo", "hi")}, is_arc=np.zeros(len(pts), bool))
+    coeffs = B._coeffs(pts)
+    fallback = np.asarray(
+        K.deviation_kernel(coeffs, pts[:, 0], dict(lines, a=pts[:, 0], b=corner), dict(lines, a=corner, b=pts[:, 5]))
+    )
+    for i in range(len(pts)):
+        dense = _dense_line_distance(pts[i], corner[i])
+        for bound in (dev[i], fallback[i]):
+            if np.isfinite(bound):
+                assert bound >= dense - 1e-12, (cases[i], bound, dense)
+                assert bound <= 1.25 * dense + 1e-9, (cases[i], bound, dense)  # and useful
+
+
+def test_a_blend_crossing_the_bisecting_plane_three_times_is_left_to_the_deviation_kernel():
+    """An S-shaped control polygon crosses the corner's bisecting plane three times: the corner kernel cannot
+    certify a single crossing and says so (inf); blend_path measures it with the deviation kernel instead."""
+    pts, corner = _corner_blend(10.0, 1.0, 1.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    pts[2], pts[3] = [0.2, -0.05, 0.0], [-0.2, 0.08, 0.0]  # the inner points swapped across the plane
+    n = np.array([1 + np.cos(np.deg2rad(10)), np.sin(np.deg2rad(10)), 0])
+    side = np.sign((pts - corner) @ n)
+    assert np.sum(side[1:] != side[:-1]) == 3
+    assert np.isinf(np.asarray(K.blend_kernel(pts[None], corner[None])["dev"])[0])

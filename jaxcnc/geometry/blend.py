@@ -168,8 +168,9 @@ def _blend_round(
     Returns the kernel's outputs for every blend, with the start points ``origin`` ``(J, 3)`` and the end
     tangents ``t0``, ``t1`` replaced by the spans' ``Ta``, ``Tb`` (which :func:`_blend_fields` puts at a whole
     blend's ends in any case); the rows ``kept`` ``(k,)`` (sorted) whose control points ``(k, 6, 3)`` are kept:
-    those ``need`` ``(J,)`` marks and those :func:`_blend_fields` will split (their path parameter strays more than
-    ``BLEND_SPEED_TOL`` from arc length).
+    those ``need`` ``(J,)`` marks, those :func:`_blend_fields` will split (their path parameter strays more than
+    ``BLEND_SPEED_TOL`` from arc length) and those whose distance the kernel left to
+    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel` (``dev`` infinite).
     """
     n = j.size
     arrays = span_arrays(spans)
@@ -180,7 +181,7 @@ def _blend_round(
         pts, ta, tb = _blend_points(spans, j[lo:hi], ell_a[lo:hi], ell_b[lo:hi], k_mid, arrays)
         part = _kernel(pts, corner[lo:hi])
         part.update(origin=pts[:, 0], t0=ta, t1=tb)
-        rows = np.flatnonzero(need[lo:hi] | ~(part["err"] <= poly.BLEND_SPEED_TOL))
+        rows = np.flatnonzero(need[lo:hi] | ~(part["err"] <= poly.BLEND_SPEED_TOL) | ~np.isfinite(part["dev"]))
         kept.append(lo + rows)
         kept_pts.append(pts[rows])
         del pts
@@ -316,9 +317,9 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         k_mid[frozen] = 0.0
         changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
         with_arc = changed & ~lines  # arcs take part: measure against the arc itself
-        other = np.flatnonzero(with_arc)
         found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, with_arc)
         dev = found["dev"].copy()
+        other = np.flatnonzero(with_arc | (changed & ~np.isfinite(dev)))  # (and where the kernel could not tell)
         if other.size:
             pts = kept_pts[np.searchsorted(kept, other)]
             dev[other] = _deviation(spans, j[other], ell_a[other], ell_b[other], _coeffs(pts))

@@ -27,8 +27,14 @@ from jaxcnc.jitcache import cached_jit
 
 #: Points where a blend's parameter speed and maxima are checked (its check points).
 N_CHECK = 9
-#: Newton steps for the point where the blend crosses the corner's bisecting plane.
+#: Newton steps for the point where a blend crosses its corner's bisecting plane, and the largest
+#: distance from that plane (mm) at which the point found counts as the crossing.
 CROSS_NEWTON = 6
+CROSS_RESIDUAL_MM = 1e-9
+#: The widest gap between a blend's distance samples (the ends and the 16 quadrature nodes), and where
+#: beside the crossing the distance is measured too, in that gap.
+H_MAX = float(np.max(np.diff(np.concatenate([[0.0], poly._GX, [1.0]]))))
+CROSS_LADDER = (1 / 4, 1 / 32)
 
 _M5 = np.array([[comb(5, k) * comb(k, i) * (-1) ** (k - i) for i in range(6)] for k in range(6)], float)
 _GX, _GW = poly._GX, poly._GW
@@ -85,8 +91,9 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
     its poly table keeps no weight column: :class:`~jaxcnc.geometry.spans.PolyTable`),
     ``length``, ``timing`` ``(J, 6)``, ``err``, ``d1_max``, ``d2_max``, ``kappa_max`` (at ``N_CHECK``
     points), ``lo``, ``hi`` ``(J, 3)`` (hull), ``t0``, ``t1`` (unit end tangents) and ``dev``: the
-    largest distance from the blend to the segments ``P0``–corner and corner–``P5`` (sampled at the
-    16 quadrature nodes and both ends, plus ``max|P''| h²/8`` for the widest gap ``h`` between them).
+    largest distance from the blend to the segments ``P0``–corner and corner–``P5`` (an upper bound: sampled
+    at the 16 quadrature nodes and both ends, bounded between them, and measured where it peaks), or
+    ``inf`` where the kernel cannot certify its peak (then :func:`deviation_kernel` measures it).
     """
     rel = pts - pts[:, :1, :]
     c = jnp.einsum("ki,jid->jkd", jnp.asarray(_M5), rel)  # power-basis coefficients (J, 6, 3)
@@ -123,17 +130,38 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
         + (q1[0] * q2[1] - q1[1] * q2[0]) ** 2
     )
     err = jnp.where(jnp.all(vv[1] > 0, axis=1), jnp.max(jnp.abs(s1 - 1.0), axis=1), jnp.inf)
-    # distance to the two straight pieces: min(d_in, d_out) is smooth where one of them is the nearer
-    # (sampled at the quadrature nodes and the ends, plus max|P''| h²/8 between samples), and peaks where
-    # they are equal — on the plane through the corner normal to t_in + t_out, which the blend crosses
-    # once: that point (Newton on the quintic (P(u) - C)·n = 0) is measured too
+    # distance to the two straight pieces P0–C, C–P5 (the distance to the corner's polyline is their
+    # minimum). Where one piece is the nearer it is smooth: sampled at the quadrature nodes and the ends,
+    # and between samples h apart it rises above them by at most the sag M h²/8 (M bounds |P''| on the
+    # interval). Where the nearer piece changes it peaks: on the plane through C normal to
+    # t_in + t_out. The blend crosses that plane once where the control points' signed distances to it
+    # change sign once (a Bézier curve crosses a plane no more often than its control polygon); there the
+    # crossing uc (Newton on the quintic (P(u) - C)·n = 0, its residual checked) is measured, and points
+    # closing in on it (CROSS_LADDER), so the pieces next to the peak are narrow and their sag tiny. A blend
+    # without that certificate gets inf: "not measured here" (the caller measures it with
+    # deviation_kernel, which bounds any number of crossings).
+    # (points as three (J, Q) columns, not (J, Q, 3): XLA:CPU vectorises along the last axis)
     us = jnp.concatenate([jnp.zeros((1, 1)), gx, jnp.ones((1, 1))], axis=1)
-    # points as three (J, Q) columns, not (J, Q, 3): XLA:CPU vectorises along the last axis
-    pos = [_horner([ci[:, None] for ci in cx[i]], us, 0)[0] + pts[:, :1, i] for i in range(3)]
-    dist = jnp.minimum(_segment_distance_cols(pos, pts[:, 0], corner), _segment_distance_cols(pos, corner, pts[:, 5]))
+    gaps = us[:, 1:] - us[:, :-1]
+    d = [_horner([ci[:, None] for ci in cx[i]], us, 2) for i in range(3)]
+    pos = [d[i][0] + pts[:, :1, i] for i in range(3)]
+    nearer = jnp.minimum(_segment_distance_cols(pos, pts[:, 0], corner), _segment_distance_cols(pos, corner, pts[:, 5]))
+    # |P''| on a sample interval: at most the larger end value plus max|P''''| h²/8 (P'' is a cubic, P''''
+    # linear: largest at an end)
+    d2 = jnp.sqrt(d[0][2] ** 2 + d[1][2] ** 2 + d[2][2] ** 2)
+    d4 = jnp.maximum(
+        jnp.sqrt(sum((24 * cx[i][4]) ** 2 for i in range(3))),
+        jnp.sqrt(sum((24 * cx[i][4] + 120 * cx[i][5]) ** 2 for i in range(3))),
+    )
+    m_k = jnp.maximum(d2[:, :-1], d2[:, 1:]) + d4[:, None] * gaps * gaps / 8
+    bound = jnp.max(jnp.maximum(nearer[:, :-1], nearer[:, 1:]) + m_k * gaps * gaps / 8, axis=1)
     t_in = corner - pts[:, 0]
     t_out = pts[:, 5] - corner
     n = t_in / jnp.linalg.norm(t_in, axis=1, keepdims=True) + t_out / jnp.linalg.norm(t_out, axis=1, keepdims=True)
+    side = [jnp.sign(sum((pts[:, m, i] - corner[:, i]) * n[:, i] for i in range(3))) for m in range(6)]
+    once = sum((side[m + 1] != side[m]).astype(jnp.int32) for m in range(5)) == 1
+    for m in range(6):
+        once = once & (side[m] != 0)
     c0 = pts[:, 0] - corner
     uc = jnp.full(length.shape, 0.5)
     for _ in range(CROSS_NEWTON):
@@ -141,15 +169,34 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
         f = sum((g[i][0] + c0[:, i]) * n[:, i] for i in range(3))
         fp = sum(g[i][1] * n[:, i] for i in range(3))
         uc = jnp.clip(uc - f / jnp.where(fp != 0, fp, 1.0), 0.0, 1.0)
-    # as three (J, 1) columns: a (J, 1, 3) array's sums over its last axis cost half the kernel (XLA:CPU
-    # vectorises along that axis of 3); the same formulas, summed in another order (values within ~1e-15 mm)
-    pc = [(_horner([ci for ci in cx[i]], uc, 0)[0] + pts[:, 0, i])[:, None] for i in range(3)]
-    at_cross = jnp.minimum(
-        _segment_distance_cols(pc, pts[:, 0], corner), _segment_distance_cols(pc, corner, pts[:, 5])
-    )[:, 0]
-    d2 = [_horner([ci[:, None] for ci in cx[i]], us, 2)[2] for i in range(3)]
-    d2max = jnp.max(jnp.sqrt(d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]), axis=1)
-    h = float(np.max(np.diff(np.concatenate([[0.0], _GX, [1.0]]))))
+
+    # as three (J, 1) columns each: a (J, 1, 3) or (J, 3) array's sums over its last axis cost half the
+    # kernel (XLA:CPU vectorises along that last axis)
+    def nearer_at(u):
+        p = [(_horner(cx[i], u, 0)[0] + pts[:, 0, i])[:, None] for i in range(3)]
+        d = jnp.minimum(_segment_distance_cols(p, pts[:, 0], corner), _segment_distance_cols(p, corner, pts[:, 5]))
+        return d[:, 0], p
+
+    at_cross, pc = nearer_at(uc)
+    residual = jnp.abs(sum((pc[i][:, 0] - corner[:, i]) * n[:, i] for i in range(3)))
+    # the sample interval holding uc is not smooth: it is covered by a ladder of points closing in on uc
+    # from both sides (the pieces next to the peak narrow, their sag tiny) and the rest of it beyond the
+    # ladder. All lie within H_MAX of uc, where |P''| <= |P''(uc)| + |P'''(uc)| H_MAX + max|P''''| H_MAX²/2
+    at = [_horner(cx[i], uc, 3) for i in range(3)]
+    m_uc = (
+        jnp.sqrt(sum(at[i][2] ** 2 for i in range(3)))
+        + jnp.sqrt(sum(at[i][3] ** 2 for i in range(3))) * H_MAX
+        + d4 * H_MAX**2 / 2
+    )
+    for direction in (-1.0, 1.0):
+        knots = [jnp.clip(uc + direction * H_MAX * step, 0.0, 1.0) for step in CROSS_LADDER] + [uc]
+        values = [nearer_at(u)[0] for u in knots[:-1]] + [at_cross]
+        bound = jnp.maximum(bound, values[0] + m_uc * H_MAX**2 / 8)  # the rest of the interval, beyond
+        for q in range(len(knots) - 1):
+            w = knots[q + 1] - knots[q]
+            bound = jnp.maximum(bound, jnp.maximum(values[q], values[q + 1]) + m_uc * w * w / 8)
+    certified = once & (residual <= CROSS_RESIDUAL_MM)
+    dev = jnp.where(certified, bound, jnp.inf)
     t0 = p1_0 / jnp.linalg.norm(p1_0, axis=1, keepdims=True)
     t1 = p1_1 / jnp.linalg.norm(p1_1, axis=1, keepdims=True)
     return {
@@ -164,7 +211,7 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
         "hi": jnp.max(pts, axis=1),
         "t0": t0,
         "t1": t1,
-        "dev": jnp.maximum(jnp.max(dist, axis=1) + d2max * h * h / 8, at_cross),
+        "dev": dev,
     }
 
 
@@ -192,16 +239,23 @@ def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, pi
     ``(J, 3)``, ``radius``, ``rise``, ``lo``, ``hi`` (the part's angles) — zeros where ``is_arc`` is false.
 
     The bound holds between the ``N_DEVIATION`` samples too, however often the nearer piece changes
-    (:func:`interval_bound`).
+    (:func:`deviation_bound`).
     """
     return _compiled(_deviation_kernel)(coeffs, start, piece_in, piece_out)
 
 
-def interval_bound(f: jnp.ndarray, g: jnp.ndarray, excess_f, excess_g, chord_err) -> jnp.ndarray:
-    """``(J,)`` upper bound of ``max min(f(u), g(u))`` over a blend from samples ``f``, ``g`` ``(J, Q)``.
+#: Sub-intervals the interval with the largest bound is cut into and measured again (:func:`deviation_bound`),
+#: and how many times in a row.
+REFINE = 4
+REFINE_LEVELS = 6
+
+
+def interval_bounds(f: jnp.ndarray, g: jnp.ndarray, excess_f, excess_g, chord_err) -> jnp.ndarray:
+    """``(J, Q-1)`` upper bound of ``max min(f(u), g(u))`` on each interval between samples ``f``, ``g``
+    ``(J, Q)`` of a blend's distances to the two pieces it replaces.
 
     Between two samples ``u_k``, ``u_k+1`` the blend ``P`` strays from its chord ``Q`` by at most
-    ``chord_err`` (``(J, 1)`` or ``(J, Q-1)``: ``max|P''| h²/8``), and a distance is 1-Lipschitz, so
+    ``chord_err`` (``(J, Q-1)``: ``max|P''| h²/8``), and a distance is 1-Lipschitz, so
     ``f(P(u)) <= f(Q(u)) + chord_err``. Along the straight chord the distance to a segment is convex
     (below the line through its two samples); the distance to an arc from inside it is not, but
     rises above that line by at most ``excess`` (``(J, Q-1)``, or 0; see :func:`_arc_excess`). So on
@@ -216,7 +270,56 @@ def interval_bound(f: jnp.ndarray, g: jnp.ndarray, excess_f, excess_g, chord_err
     crosses = d0 * d1 < 0  # the lines cross strictly inside: there they are equal, and min(f, g) peaks
     s = jnp.where(crosses, d0 / jnp.where(crosses, d0 - d1, 1.0), 0.0)
     at_cross = jnp.where(crosses, f0 + (f1 - f0) * s, ends)
-    return jnp.max(jnp.maximum(ends, at_cross) + chord_err, axis=1)
+    return jnp.maximum(ends, at_cross) + chord_err
+
+
+def deviation_bound(measure, u: jnp.ndarray) -> jnp.ndarray:
+    """``(J,)`` upper bound of a blend's distance to the two pieces it replaces.
+
+    ``measure(u)`` takes parameters ``(J, Q)`` (or ``(1, Q)``) and returns ``f``, ``g`` ``(J, Q)`` (the
+    distances there), the excesses ``(J, Q-1)`` or scalars of :func:`interval_bounds`, and the second
+    and third derivatives of the blend at ``u`` (each three ``(J, Q)`` columns); ``u`` ``(1, Q)``: the
+    samples, 0 to 1. The interval with the largest bound — mostly where the nearer piece changes, where
+    the chords' crossing (or the kink where a point's nearest point of a segment becomes its end)
+    stands above the true peak — is cut into ``REFINE`` and bounded again, ``REFINE_LEVELS`` times
+    (each time the piece with the largest bound); every interval left behind keeps its own bound, so
+    the result stays a bound however the peaks lie, and hugs the highest.
+    """
+
+    def bounds(u):
+        f, g, ef, eg, d2, d3 = measure(u)
+        h = u[:, 1:] - u[:, :-1]
+        return interval_bounds(f, g, ef, eg, _second_derivative_bound(d2, d3, h) * (h * h / 8))
+
+    per = bounds(u)
+    width = per.shape[0], u.shape[1]
+    u = jnp.broadcast_to(u, width)
+    cut = jnp.asarray(np.linspace(0.0, 1.0, REFINE + 1))[None, :]
+    others = jnp.full(width[:1], -jnp.inf)
+    for _ in range(REFINE_LEVELS):
+        k = jnp.argmax(per, axis=1)
+        others = jnp.maximum(others, jnp.max(jnp.where(jnp.arange(per.shape[1]) == k[:, None], -jnp.inf, per), axis=1))
+        lo = jnp.take_along_axis(u, k[:, None], axis=1)
+        u = lo + (jnp.take_along_axis(u, k[:, None] + 1, axis=1) - lo) * cut
+        per = bounds(u)
+    return jnp.maximum(others, jnp.max(per, axis=1))
+
+
+def _second_derivative_bound(d2: list[jnp.ndarray], d3: list[jnp.ndarray], h: jnp.ndarray) -> jnp.ndarray:
+    """``(J, Q-1)`` bound of the second derivative's norm on each interval of width ``h`` between samples
+    where the second and third derivatives are ``d2``, ``d3`` (three ``(J, Q)`` columns each).
+
+    A quintic's second derivative ``D`` is a cubic; on an interval ``[a, b]`` its Bernstein coefficients
+    are ``D(a)``, ``D(a) + h D'(a)/3``, ``D(b) - h D'(b)/3``, ``D(b)`` (the cubic Hermite form), and its
+    values there are convex combinations of them: the largest of their norms bounds it (a bound, not a
+    sample).
+    """
+    b = [
+        [c[:, :-1], c[:, :-1] + h * e[:, :-1] / 3, c[:, 1:] - h * e[:, 1:] / 3, c[:, 1:]]
+        for c, e in zip(d2, d3, strict=True)
+    ]
+    sq = [b[0][m] * b[0][m] + b[1][m] * b[1][m] + b[2][m] * b[2][m] for m in range(4)]
+    return jnp.sqrt(jnp.maximum(jnp.maximum(sq[0], sq[1]), jnp.maximum(sq[2], sq[3])))
 
 
 def _arc_excess(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
@@ -267,29 +370,21 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
     return jnp.where(pc["is_arc"][:, None], jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), seg)
 
 
-def second_derivative_bound(cx: list[list[jnp.ndarray]]) -> jnp.ndarray:
-    """``(J,)`` ``max |P''|`` over ``[0, 1]`` of quintics with power-basis coefficients ``cx[i][k]`` ``(J, ...)``.
-
-    ``P''`` is the cubic ``2 c2 + 6 c3 u + 12 c4 u² + 20 c5 u³``; in Bernstein form its values are
-    convex combinations of its four Bernstein coefficients, so the largest of their norms bounds it
-    (not a sample: a bound).
-    """
-    a = [[2 * c[2], 6 * c[3], 12 * c[4], 20 * c[5]] for c in cx]
-    b = [[ai[0], ai[0] + ai[1] / 3, ai[0] + 2 * ai[1] / 3 + ai[2] / 3, ai[0] + ai[1] + ai[2] + ai[3]] for ai in a]
-    return jnp.max(jnp.stack([jnp.sqrt(b[0][m] ** 2 + b[1][m] ** 2 + b[2][m] ** 2) for m in range(4)]), axis=0)
-
-
 def _deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
     """:func:`deviation_kernel` before compilation."""
     cx = [[coeffs[:, k, i][:, None] for k in range(6)] for i in range(3)]
     u = jnp.asarray(np.linspace(0.0, 1.0, N_DEVIATION))[None, :]
-    p = [_horner(cx[i], u, 0)[0] + start[:, i, None] for i in range(3)]
-    h = 1.0 / (N_DEVIATION - 1)
-    chord_err = second_derivative_bound(cx) * h * h / 8  # (J, 1)
-    return interval_bound(
-        _piece_distance(p, piece_in),
-        _piece_distance(p, piece_out),
-        _arc_excess(p, piece_in),
-        _arc_excess(p, piece_out),
-        chord_err,
-    )
+
+    def measure(u):
+        d = [_horner(cx[i], u, 3) for i in range(3)]
+        p = [d[i][0] + start[:, i, None] for i in range(3)]
+        return (
+            _piece_distance(p, piece_in),
+            _piece_distance(p, piece_out),
+            _arc_excess(p, piece_in),
+            _arc_excess(p, piece_out),
+            [di[2] for di in d],
+            [di[3] for di in d],
+        )
+
+    return deviation_bound(measure, u)
