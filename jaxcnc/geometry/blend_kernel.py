@@ -226,7 +226,7 @@ def _segment_distance_cols(p: list[jnp.ndarray], a: jnp.ndarray, b: jnp.ndarray)
 
 
 #: Points of a blend where its distance to the replaced pieces is sampled (:func:`deviation_kernel`).
-N_DEVIATION = 33
+N_DEVIATION = 25
 
 
 def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
@@ -247,7 +247,7 @@ def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, pi
 #: Sub-intervals the interval with the largest bound is cut into and measured again (:func:`deviation_bound`),
 #: and how many times in a row.
 REFINE = 4
-REFINE_LEVELS = 6
+REFINE_LEVELS = 4
 
 
 def interval_bounds(f: jnp.ndarray, g: jnp.ndarray, excess_f, excess_g, chord_err) -> jnp.ndarray:
