@@ -138,6 +138,8 @@ def machine_axes(program_p: np.ndarray, axis_source: np.ndarray, home: np.ndarra
 #: at a time, every window in one shape, so the tick stage's memory does not grow with the job (a 1 M-block blended
 #: contour, 5.2 M segments: 2.8 GB peak with the whole law on the device, docs/planning.md "Memory").
 WINDOW_SEGMENTS = 1 << 17
+#: Fewest span rows a window's spans are padded to.
+WINDOW_MIN_SPANS = 1 << 12
 
 
 class _Window(NamedTuple):
@@ -209,7 +211,10 @@ class TickSampler:
         n_ticks = self.job.plan.n_ticks
         if win.tick_end <= min(tick, n_ticks):
             raise RuntimeError(f"tick {tick}: no window of {self._window_segments} segments holds it (a bug)")
-        rows = max(self._window_segments, bucket_size(win.span_last - win.span_first))
+        # the spans under a window, padded to a power of two: every window's law has the same shape, but a window
+        # holds fewer spans than segments (a blended contour: ~31k of 131k), and copying and uploading padding
+        # rows was a third of the tick stage; a job's windows fall in one or two such sizes (each compiles once)
+        rows = max(WINDOW_MIN_SPANS, 1 << int(win.span_last - win.span_first - 1).bit_length())
         spans = window_span_arrays(self.job.spans, win.span_first, win.span_last, rows, rows)
         end = win.tick_end if win.tick_end <= n_ticks else np.iinfo(np.int64).max  # the last: and past the end
         return _Window(tick, end, win.law.fn, win.law.arrays, spans, win.span_first)
