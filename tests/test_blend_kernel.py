@@ -75,7 +75,8 @@ def test_a_long_blend_inside_a_wide_arc_is_bounded_usefully():
 
 
 def _check_case(line_first, length, radius, sweep, ccw, kink, share) -> None:
-    """The deviation bound of one junction against the dense reference (see the property test)."""
+    """The deviation bound of one line–arc or arc–line junction against the dense reference (see the property
+    test)."""
     g = "G2" if not ccw else "G3"
     if line_first:  # along +X into the origin, then the arc leaving at angle `kink`
         end, center = _arc_start_at_origin(radius, sweep, ccw, kink)
@@ -85,14 +86,19 @@ def _check_case(line_first, length, radius, sweep, ccw, kink, share) -> None:
         start, center = _arc_end_at_origin(radius, sweep, ccw, kink)
         i, j = center - start
         text = f"G0 X{start[0]:.9f} Y{start[1]:.9f}\n{g} X0 Y0 I{i:.9f} J{j:.9f} F600\nG1 X{length:.9f} Y0\n"
+    _check_junction(text, share, radius)
+
+
+def _check_junction(text: str, share: float, min_radius: float) -> None:
+    """The deviation bound of the last junction of program ``text``, its blend cut back by ``share`` of the most
+    allowed, against the blend at 801 points and the two pieces as 1501-point polylines (on an arc the chords
+    lie inside it by at most δ²/8R, R >= ``min_radius``: the slack allowed)."""
     spans = program_spans(parse_gcode(text, "j.ngc"))
     k = np.array([len(spans) - 2])
     ell = share * 0.5 * np.minimum(spans.length[k], spans.length[k + 1])
     pts, _, _ = B._blend_points(spans, k, ell, ell)
     coeffs = B._coeffs(pts)
     bound = B._deviation(spans, k, ell, ell, coeffs)[0]
-    # dense reference: the blend at 801 points against 1501-point polylines of the two pieces (on an arc
-    # the chords lie inside it by at most δ²/8R: the slack allowed)
     u = np.linspace(0.0, 1.0, 801)[None]
     p = poly.bezier_derivatives(coeffs, u, 0)[0][0] + pts[0, 0]
     arrays = span_arrays(spans)
@@ -101,9 +107,39 @@ def _check_case(line_first, length, radius, sweep, ccw, kink, share) -> None:
     ref_in = evaluate_path(arrays, np.full(s_in.size, k[0]), s_in)[0]
     ref_out = evaluate_path(arrays, np.full(s_out.size, k[0] + 1), s_out)[0]
     dense = np.max(np.minimum(_polyline_distance(p, ref_in), _polyline_distance(p, ref_out)))
-    sagitta = (ell[0] / 1500) ** 2 / (8 * radius)
+    sagitta = (ell[0] / 1500) ** 2 / (8 * min_radius)
     assert bound >= dense - sagitta - 1e-12, (text, bound, dense)
     assert bound <= 1.25 * dense + 1e-9, (text, bound, dense)  # and a useful bound, not a loose one
+
+
+arc_pairs = st.tuples(
+    st.floats(0.3, 50.0),  # radius in
+    st.floats(np.deg2rad(10), np.deg2rad(270)),  # sweep in
+    st.booleans(),  # counter-clockwise in
+    st.floats(0.3, 50.0),  # radius out
+    st.floats(np.deg2rad(10), np.deg2rad(270)),  # sweep out
+    st.booleans(),  # counter-clockwise out
+    st.floats(np.deg2rad(0.5), np.deg2rad(150)) | st.floats(-np.deg2rad(150), -np.deg2rad(0.5)),  # kink
+    st.floats(0.05, 1.0),  # cut-back as a share of the largest allowed
+    st.floats(-2.0, 2.0),  # the second arc's rise along Z (a helix; 0: in the plane)
+)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(arc_pairs, min_size=1, max_size=3))
+def test_the_deviation_bound_of_arc_arc_junctions_is_never_below_the_dense_distance(cases):
+    """Arc into the origin (its end tangent along +X), then an arc (or a helix) leaving it at angle `kink`:
+    both pieces curve, on either side, the blend inside one and outside the other."""
+    for r1, sw1, ccw1, r2, sw2, ccw2, kink, share, rise in cases:
+        start, c1 = _arc_end_at_origin(r1, sw1, ccw1, 0.0)
+        end, c2 = _arc_start_at_origin(r2, sw2, ccw2, kink)
+        g1, g2 = ("G3" if ccw1 else "G2"), ("G3" if ccw2 else "G2")
+        i1, j1 = c1 - start
+        text = (
+            f"G0 X{start[0]:.9f} Y{start[1]:.9f} Z0\n{g1} X0 Y0 I{i1:.9f} J{j1:.9f} F600\n"
+            f"{g2} X{end[0]:.9f} Y{end[1]:.9f} Z{rise:.9f} I{c2[0]:.9f} J{c2[1]:.9f}\n"
+        )
+        _check_junction(text, share, min(r1, r2))
 
 
 def _dense_line_distance(pts: np.ndarray, corner: np.ndarray) -> float:
