@@ -536,7 +536,7 @@ def test_random_programs_exercise_valid_runs():
 
     count()
     # a fair share valid (runs of 41-66 of 200 seen: the draws are not the same in every process), and arcs in
-    # them: more than one per valid program (2.2 to 9.9 per program seen; a full CI run drew 53 and 117 arcs)
+    # them: at least one per valid program on average (2.2 to 9.9 seen; a full CI run drew 53 and 117 arcs)
     assert seen["ok"] >= 30 and seen["arcs"] >= seen["ok"], seen
 
 
