@@ -349,25 +349,44 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
     (:func:`deviation_kernel`).
 
     On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
-    on a circle; an upper bound on a helix, whose tiny parts barely rise).
+    on a circle; an upper bound on a helix, whose tiny parts barely rise). Where no part rises (no
+    helix in the batch), the same distances without an angle per point: a point within the part's
+    angles (``u·m >= ρ cos α``, ``m`` the part's middle direction, ``α`` its half angle) is
+    ``sqrt((ρ - r)² + z²)`` from it, any other is nearest the end on its side of ``m``.
     """
     seg = _segment_distance_cols(p, pc["a"], pc["b"])
     rel = [p[i] - pc["center"][:, i, None] for i in range(3)]
-    phi = jnp.arctan2(
-        sum(rel[i] * pc["e2"][:, i, None] for i in range(3)), sum(rel[i] * pc["e1"][:, i, None] for i in range(3))
-    )
+    x = sum(rel[i] * pc["e1"][:, i, None] for i in range(3))
+    y = sum(rel[i] * pc["e2"][:, i, None] for i in range(3))
     lo, hi = pc["lo"][:, None], pc["hi"][:, None]
-    mid = (lo + hi) / 2
-    psi = jnp.clip(mid + jnp.mod(phi - mid + jnp.pi, 2 * jnp.pi) - jnp.pi, lo, hi)
-    cos, sin = jnp.cos(psi), jnp.sin(psi)
     r = pc["radius"][:, None]
-    d = [
-        p[i]
-        - (pc["center"][:, i, None] + r * (cos * pc["e1"][:, i, None] + sin * pc["e2"][:, i, None]))
-        - pc["rise"][:, None] * psi * pc["axis"][:, i, None]
-        for i in range(3)
-    ]
-    return jnp.where(pc["is_arc"][:, None], jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), seg)
+
+    def helix(_):
+        phi = jnp.arctan2(y, x)
+        mid = (lo + hi) / 2
+        psi = jnp.clip(mid + jnp.mod(phi - mid + jnp.pi, 2 * jnp.pi) - jnp.pi, lo, hi)
+        cos, sin = jnp.cos(psi), jnp.sin(psi)
+        d = [
+            p[i]
+            - (pc["center"][:, i, None] + r * (cos * pc["e1"][:, i, None] + sin * pc["e2"][:, i, None]))
+            - pc["rise"][:, None] * psi * pc["axis"][:, i, None]
+            for i in range(3)
+        ]
+        return jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+
+    def circle(_):
+        z = sum(rel[i] * pc["axis"][:, i, None] for i in range(3))
+        rho = jnp.sqrt(x * x + y * y)
+        mid = (lo + hi) / 2
+        mx, my, cos_half = jnp.cos(mid), jnp.sin(mid), jnp.cos((hi - lo) / 2)  # (J, 1): per part, not per point
+        within = x * mx + y * my >= rho * cos_half
+        end = jnp.where(mx * y - my * x > 0, 1, 0)  # the side of the middle direction: the end at hi (b), else lo (a)
+        d_end = [p[i] - jnp.where(end == 1, pc["b"][:, i, None], pc["a"][:, i, None]) for i in range(3)]
+        to_end = jnp.sqrt(d_end[0] * d_end[0] + d_end[1] * d_end[1] + d_end[2] * d_end[2])
+        return jnp.where(within, jnp.sqrt((rho - r) ** 2 + z * z), to_end)
+
+    arc = jax.lax.cond(jnp.any(pc["is_arc"] & (pc["rise"] != 0)), helix, circle, None)
+    return jnp.where(pc["is_arc"][:, None], arc, seg)
 
 
 def _deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
