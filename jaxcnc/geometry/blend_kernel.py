@@ -144,8 +144,12 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
     us = jnp.concatenate([jnp.zeros((1, 1)), gx, jnp.ones((1, 1))], axis=1)
     gaps = us[:, 1:] - us[:, :-1]
     d = [_horner([ci[:, None] for ci in cx[i]], us, 2) for i in range(3)]
-    pos = [d[i][0] + pts[:, :1, i] for i in range(3)]
-    nearer = jnp.minimum(_segment_distance_cols(pos, pts[:, 0], corner), _segment_distance_cols(pos, corner, pts[:, 5]))
+
+    def polyline_distance(p: list[jnp.ndarray]) -> jnp.ndarray:
+        """Distance from points (three ``(J, Q)`` columns) to the polyline P0–C–P5."""
+        return jnp.minimum(_segment_distance_cols(p, pts[:, 0], corner), _segment_distance_cols(p, corner, pts[:, 5]))
+
+    nearer = polyline_distance([d[i][0] + pts[:, :1, i] for i in range(3)])
     # |P''| on a sample interval: at most the larger end value plus max|P''''| h²/8 (P'' is a cubic, P''''
     # linear: largest at an end)
     d2 = jnp.sqrt(d[0][2] ** 2 + d[1][2] ** 2 + d[2][2] ** 2)
@@ -170,19 +174,18 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
         fp = sum(g[i][1] * n[:, i] for i in range(3))
         uc = jnp.clip(uc - f / jnp.where(fp != 0, fp, 1.0), 0.0, 1.0)
 
-    # as three (J, 1) columns each: a (J, 1, 3) or (J, 3) array's sums over its last axis cost half the
-    # kernel (XLA:CPU vectorises along that last axis)
+    # points as three (J, 1) columns each: a (J, 1, 3) or (J, 3) array's sums over its last axis cost half
+    # the kernel (XLA:CPU vectorises along that last axis)
     def nearer_at(u):
-        p = [(_horner(cx[i], u, 0)[0] + pts[:, 0, i])[:, None] for i in range(3)]
-        d = jnp.minimum(_segment_distance_cols(p, pts[:, 0], corner), _segment_distance_cols(p, corner, pts[:, 5]))
-        return d[:, 0], p
+        return polyline_distance([(_horner(cx[i], u, 0)[0] + pts[:, 0, i])[:, None] for i in range(3)])[:, 0]
 
-    at_cross, pc = nearer_at(uc)
+    at = [_horner(cx[i], uc, 3) for i in range(3)]  # position and derivatives at the crossing
+    pc = [(at[i][0] + pts[:, 0, i])[:, None] for i in range(3)]
+    at_cross = polyline_distance(pc)[:, 0]
     residual = jnp.abs(sum((pc[i][:, 0] - corner[:, i]) * n[:, i] for i in range(3)))
     # the sample interval holding uc is not smooth: it is covered by a ladder of points closing in on uc
     # from both sides (the pieces next to the peak narrow, their sag tiny) and the rest of it beyond the
     # ladder. All lie within H_MAX of uc, where |P''| <= |P''(uc)| + |P'''(uc)| H_MAX + max|P''''| H_MAX²/2
-    at = [_horner(cx[i], uc, 3) for i in range(3)]
     m_uc = (
         jnp.sqrt(sum(at[i][2] ** 2 for i in range(3)))
         + jnp.sqrt(sum(at[i][3] ** 2 for i in range(3))) * H_MAX
@@ -190,7 +193,7 @@ def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarra
     )
     for direction in (-1.0, 1.0):
         knots = [jnp.clip(uc + direction * H_MAX * step, 0.0, 1.0) for step in CROSS_LADDER] + [uc]
-        values = [nearer_at(u)[0] for u in knots[:-1]] + [at_cross]
+        values = [nearer_at(u) for u in knots[:-1]] + [at_cross]
         bound = jnp.maximum(bound, values[0] + m_uc * H_MAX**2 / 8)  # the rest of the interval, beyond
         for q in range(len(knots) - 1):
             w = knots[q + 1] - knots[q]
@@ -359,11 +362,11 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
     x = sum(rel[i] * pc["e1"][:, i, None] for i in range(3))
     y = sum(rel[i] * pc["e2"][:, i, None] for i in range(3))
     lo, hi = pc["lo"][:, None], pc["hi"][:, None]
+    mid = (lo + hi) / 2
     r = pc["radius"][:, None]
 
     def helix(_):
         phi = jnp.arctan2(y, x)
-        mid = (lo + hi) / 2
         psi = jnp.clip(mid + jnp.mod(phi - mid + jnp.pi, 2 * jnp.pi) - jnp.pi, lo, hi)
         cos, sin = jnp.cos(psi), jnp.sin(psi)
         d = [
@@ -377,11 +380,10 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
     def circle(_):
         z = sum(rel[i] * pc["axis"][:, i, None] for i in range(3))
         rho = jnp.sqrt(x * x + y * y)
-        mid = (lo + hi) / 2
         mx, my, cos_half = jnp.cos(mid), jnp.sin(mid), jnp.cos((hi - lo) / 2)  # (J, 1): per part, not per point
         within = x * mx + y * my >= rho * cos_half
-        end = jnp.where(mx * y - my * x > 0, 1, 0)  # the side of the middle direction: the end at hi (b), else lo (a)
-        d_end = [p[i] - jnp.where(end == 1, pc["b"][:, i, None], pc["a"][:, i, None]) for i in range(3)]
+        at_hi = mx * y - my * x > 0  # the side of the middle direction: the end at hi (b), else lo (a)
+        d_end = [p[i] - jnp.where(at_hi, pc["b"][:, i, None], pc["a"][:, i, None]) for i in range(3)]
         to_end = jnp.sqrt(d_end[0] * d_end[0] + d_end[1] * d_end[1] + d_end[2] * d_end[2])
         return jnp.where(within, jnp.sqrt((rho - r) ** 2 + z * z), to_end)
 
