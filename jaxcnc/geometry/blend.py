@@ -43,7 +43,16 @@ from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
+from jaxcnc.geometry.spans import (
+    MIN_LENGTH_MM,
+    SPAN_FIELDS,
+    ArcTable,
+    PolyTable,
+    Spans,
+    assemble,
+    merge_polys,
+    take_spans,
+)
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -203,21 +212,32 @@ _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axi
 
 def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound):
-    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel`, padded to a bucket (at least ``DEVIATION_BUCKET``
-    rows: the shrink rounds measure fewer blends each time, and each size would compile)."""
-    arrays = span_arrays(spans)
+    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel`, ``DEVIATION_CHUNK`` blends a call (its working memory
+    bounded: 40k blends in one call held ~100 MB), each call padded to a bucket (at least ``DEVIATION_BUCKET``
+    rows: the shrink rounds measure fewer blends each time, and each size would compile). Only the spans at these
+    junctions are evaluated (their rows copied, not every span's)."""
     n = i.size
-    m = max(bucket_size(n), DEVIATION_BUCKET)
-    start = evaluate_path(arrays, i, spans.length[i] - ell_a)[0]
-    piece_in = _pieces(spans, arrays, i, spans.length[i] - ell_a, spans.length[i])
-    piece_out = _pieces(spans, arrays, i + 1, np.zeros_like(ell_b), ell_b)
-    pad = [pad_rows(x, m, 0) for x in (coeffs, start)]  # padding rows: a blend at rest at the origin
-    piece_in, piece_out = ({k: pad_rows(v, m, 0) for k, v in pc.items()} for pc in (piece_in, piece_out))
-    return np.asarray(deviation_kernel(*pad, piece_in, piece_out))[:n]
+    rows = np.unique(np.concatenate([i, i + 1]))
+    near = take_spans(spans, rows)
+    arrays = span_arrays(near)
+    a, b = np.searchsorted(rows, i), np.searchsorted(rows, i + 1)
+    length = spans.length[i]
+    dev = np.empty(n)
+    for lo in range(0, n, DEVIATION_CHUNK):
+        c = slice(lo, min(n, lo + DEVIATION_CHUNK))
+        m = max(bucket_size(c.stop - lo), DEVIATION_BUCKET)
+        start = evaluate_path(arrays, a[c], length[c] - ell_a[c])[0]
+        piece_in = _pieces(near, arrays, a[c], length[c] - ell_a[c], length[c])
+        piece_out = _pieces(near, arrays, b[c], np.zeros(c.stop - lo), ell_b[c])
+        pad = [pad_rows(x, m, 0) for x in (coeffs[c], start)]  # padding rows: a blend at rest at the origin
+        piece_in, piece_out = ({k: pad_rows(v, m, 0) for k, v in pc.items()} for pc in (piece_in, piece_out))
+        dev[c] = np.asarray(deviation_kernel(*pad, piece_in, piece_out))[: c.stop - lo]
+    return dev
 
 
-#: Fewest rows :func:`_deviation` measures in one call (a few compiled sizes for all rounds).
+#: Fewest rows :func:`_deviation` measures in one call (a few compiled sizes for all rounds), and the most.
 DEVIATION_BUCKET = 1024
+DEVIATION_CHUNK = 1 << 13
 
 
 def _trims(n: int, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
