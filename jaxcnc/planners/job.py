@@ -128,6 +128,7 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     stop = program.stop_before[rows] & first_of_block
+    del rapid, prog_feed, first_of_block  # (n,) each: not kept alive through the plan
     # the machine's limits less the margin, applied here once (none on v and a where rounding cannot reach them)
     v_max, a_max, j_max = request_limits(machine, coordinate_extent_mm(spans))
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)

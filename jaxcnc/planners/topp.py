@@ -628,7 +628,7 @@ class _GridAhead:
         blend = req.spans.kind == SpanKind.BLEND
         on = OVERLAP_WINDOWS and blend.any() and _cpus() > 1
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="jaxcnc-grid") if on else None
-        self.blend_end = np.cumsum(blend)  # blends among the spans before k + 1
+        self.blend_end = np.cumsum(blend) if on else None  # blends among the spans before k + 1 (where it builds)
         self.device = jax.config.jax_default_device  # thread-local: the worker enters the same
         self.back = self.BACK_SPANS
         self.tail: GridPiece | None = None  # the last window's rows from its commit point on
