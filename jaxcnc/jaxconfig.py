@@ -16,8 +16,11 @@ Planning runs on the host CPU whatever the default backend (:func:`planning_scop
 sequential scans over the intervals, latency-bound, and a GPU pays a kernel launch and a host round trip
 for every loop iteration. Measured on an H100 beside its own 16-core CPU (``benchmarks/gpu_vs_cpu.py``,
 2026-11-23): a 10k-block contour planned in 0.81 s on the GPU against 0.024 s on the CPU; unrolling the
-scans 64 steps per iteration brought the GPU to 0.064 s and its compile from 9 to 14–47 s. The tick
-stage and the other batched programs stay on the default device, where a GPU is 2× the CPU.
+scans 64 steps per iteration brought the GPU to 0.064 s and its compile from 9 to 14–47 s. The spans' build
+(the blends' kernels) runs in the same scope: on an H200's default device it gained nothing and cost 6–7 s of GPU
+compile in a first plan, and its spans differed in their last bits from a CPU machine's, so plans were not the same
+on every machine (2026-11-28). The tick stage and the other batched programs stay on the default device, where a
+GPU is 2× the CPU.
 """
 
 from __future__ import annotations

@@ -103,3 +103,30 @@ def test_planners_run_on_the_host_cpu_device():
     with jax.default_device("cpu"):  # a default set by the caller: the scope sets the planning device
         with planning_scope():
             assert jax.config.jax_default_device == planning_device() and on_cpu()
+
+
+def test_spans_are_built_on_the_planning_device(monkeypatch):
+    """The blends' kernels (``build_spans``) run in the planning scope too. Built on a GPU default, the spans of the
+    100k-block contour differed in their last bits from a CPU machine's (so did the plan), and its first plan took
+    18.0 s against 11.3 s, compiling the kernels for the GPU (H200, 2026-11-28, docs/planning.md). A caller's default
+    device stands in for the GPU, as above: inside the build the scope's device must replace it."""
+    import jax
+
+    import jaxcnc.planners.job as job_module
+    from jaxcnc.bench.plan import bench_machine
+    from jaxcnc.bench.programs import cam_polyline
+    from jaxcnc.jaxconfig import planning_device
+    from jaxcnc.machine import parse_machine
+
+    seen = []
+    build = job_module.build_spans
+
+    def recording(*args, **kwargs):
+        seen.append(jax.config.jax_default_device)
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(job_module, "build_spans", recording)
+    machine = parse_machine(bench_machine(0.01), "<test>")
+    with jax.default_device("cpu"):
+        job_module.plan_job(cam_polyline(30), machine)
+    assert seen == [planning_device()]

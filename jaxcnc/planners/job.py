@@ -117,7 +117,8 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     axis_source = _check_axes(program, machine)
     if len(program) >= TRIM_BLOCKS:
         release_free_heap()  # what earlier work freed (a job planned before): the spans' build starts lean
-    spans = build_spans(program, machine.path.corner_tol_mm)
+    with planning_scope():  # the blends' kernels too: the same spans on any machine, none compiled for a GPU
+        spans = build_spans(program, machine.path.corner_tol_mm)
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)
