@@ -298,7 +298,11 @@ def build_grid(
     kind = spans.kind[span]
     curved = is_curved(kind)
     boxed = kind == SpanKind.BLEND
-    major = {f: aligned_array((3, m if pad_to is None else pad_to), zeros=True) for f in AXIS_FIELDS}
+    width = m if pad_to is None else pad_to
+    # every column of the fields below is written (the padding zeroed), but k_a and k_b, whose lines stay 0
+    major = {f: aligned_array((3, width), zeros=f in ("k_a", "k_b")) for f in AXIS_FIELDS}
+    for f in AXIS_FIELDS:
+        major[f][:, m:] = 0.0
     for f, field in (("t_a", spans.tangent_in), ("t_b", spans.tangent_out)):
         cols = np.ascontiguousarray(field[first:last].T)  # (3, the window's spans)
         for i in range(3):
