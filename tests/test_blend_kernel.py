@@ -96,12 +96,12 @@ def _check_junction(text: str, share: float, min_radius: float) -> None:
     spans = program_spans(parse_gcode(text, "j.ngc"))
     k = np.array([len(spans) - 2])
     ell = share * 0.5 * np.minimum(spans.length[k], spans.length[k + 1])
-    pts, _, _ = B._blend_points(spans, k, ell, ell)
+    arrays = span_arrays(spans)
+    pts, _, _ = B._blend_points(spans, k, ell, ell, arrays=arrays)
     coeffs = B._coeffs(pts)
-    bound = B._deviation(spans, k, ell, ell, coeffs)[0]
+    bound = B._deviation(spans, arrays, k, ell, ell, coeffs)[0]
     u = np.linspace(0.0, 1.0, 801)[None]
     p = poly.bezier_derivatives(coeffs, u, 0)[0][0] + pts[0, 0]
-    arrays = span_arrays(spans)
     s_in = np.linspace(spans.length[k[0]] - ell[0], spans.length[k[0]], 1501)
     s_out = np.linspace(0.0, ell[0], 1501)
     ref_in = evaluate_path(arrays, np.full(s_in.size, k[0]), s_in)[0]

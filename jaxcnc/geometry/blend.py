@@ -43,16 +43,7 @@ from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.geometry.spans import (
-    MIN_LENGTH_MM,
-    SPAN_FIELDS,
-    ArcTable,
-    PolyTable,
-    Spans,
-    assemble,
-    merge_polys,
-    take_spans,
-)
+from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -163,6 +154,7 @@ def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
 
 def _blend_round(
     spans: Spans,
+    arrays: dict,
     j: np.ndarray,
     ell_a: np.ndarray,
     ell_b: np.ndarray,
@@ -170,9 +162,10 @@ def _blend_round(
     corner: np.ndarray,
     need: np.ndarray,
 ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
-    """:func:`_blend_points` and :func:`_kernel` of the junctions after spans ``j``, ``KERNEL_CHUNK`` junctions at a
-    time: the points of all blends (144 MB at 1 M) and their evaluation's temporaries never exist at once. The values
-    are those of the two calls over all junctions, bit for bit.
+    """:func:`_blend_points` and :func:`_kernel` of the junctions after spans ``j`` (``arrays``: their
+    ``span_arrays``), ``KERNEL_CHUNK`` junctions at a time: the points of all blends (144 MB at 1 M) and their
+    evaluation's temporaries never exist at once. The values are those of the two calls over all junctions, bit for
+    bit.
 
     Returns the kernel's outputs for every blend, with the start points ``origin`` ``(J, 3)`` and the end
     tangents ``t0``, ``t1`` replaced by the spans' ``Ta``, ``Tb`` (which :func:`_blend_fields` puts at a whole
@@ -182,7 +175,6 @@ def _blend_round(
     :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel` (``dev`` infinite).
     """
     n = j.size
-    arrays = span_arrays(spans)
     out: dict[str, np.ndarray] = {}
     kept, kept_pts = [], []
     for lo in range(0, max(n, 1), KERNEL_CHUNK):
@@ -210,25 +202,23 @@ KERNEL_CHUNK = 1 << 16
 _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axis=1)
 
 
-def _deviation(spans: Spans, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+def _deviation(
+    spans: Spans, arrays: dict, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray
+) -> np.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound):
     :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel`, ``DEVIATION_CHUNK`` blends a call (its working memory
-    bounded: 40k blends in one call held ~100 MB), each call padded to a bucket (at least ``DEVIATION_BUCKET``
-    rows: the shrink rounds measure fewer blends each time, and each size would compile). Only the spans at these
-    junctions are evaluated (their rows copied, not every span's)."""
+    bounded: the 1 M-block contour's 40k arc junctions in one call held ~100 MB more), each call padded to a bucket
+    (at least ``DEVIATION_BUCKET`` rows: the shrink rounds measure fewer blends each time, and each size would
+    compile). ``arrays``: ``span_arrays(spans)``."""
     n = i.size
-    rows = np.unique(np.concatenate([i, i + 1]))
-    near = take_spans(spans, rows)
-    arrays = span_arrays(near)
-    a, b = np.searchsorted(rows, i), np.searchsorted(rows, i + 1)
     length = spans.length[i]
     dev = np.empty(n)
     for lo in range(0, n, DEVIATION_CHUNK):
         c = slice(lo, min(n, lo + DEVIATION_CHUNK))
         m = max(bucket_size(c.stop - lo), DEVIATION_BUCKET)
-        start = evaluate_path(arrays, a[c], length[c] - ell_a[c])[0]
-        piece_in = _pieces(near, arrays, a[c], length[c] - ell_a[c], length[c])
-        piece_out = _pieces(near, arrays, b[c], np.zeros(c.stop - lo), ell_b[c])
+        start = evaluate_path(arrays, i[c], length[c] - ell_a[c])[0]
+        piece_in = _pieces(spans, arrays, i[c], length[c] - ell_a[c], length[c])
+        piece_out = _pieces(spans, arrays, i[c] + 1, np.zeros(c.stop - lo), ell_b[c])
         pad = [pad_rows(x, m, 0) for x in (coeffs[c], start)]  # padding rows: a blend at rest at the origin
         piece_in, piece_out = ({k: pad_rows(v, m, 0) for k, v in pc.items()} for pc in (piece_in, piece_out))
         dev[c] = np.asarray(deviation_kernel(*pad, piece_in, piece_out))[: c.stop - lo]
@@ -312,11 +302,14 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     # line–line: the deviation is (3/8) ℓ sin(θ/2) exactly; elsewhere measure and shrink
     check = np.flatnonzero(~lines)
     keep = np.ones(j.size, bool)
+    arrays = span_arrays(
+        spans
+    )  # what the blends' points and deviations evaluate, made once (dropped before the fields)
     for _ in range(SHRINK_ROUNDS):
         if check.size == 0:
             break
-        pts, _, _ = _blend_points(spans, j[check], ell[check], ell[check])
-        dev = _deviation(spans, j[check], ell[check], ell[check], _coeffs(pts))
+        pts, _, _ = _blend_points(spans, j[check], ell[check], ell[check], arrays=arrays)
+        dev = _deviation(spans, arrays, j[check], ell[check], ell[check], _coeffs(pts))
         bad = dev > tol[j[check]]
         ell[check[bad]] *= np.clip(0.95 * tol[j[check[bad]]] / dev[bad], 0.05, 0.95)
         check = check[bad]
@@ -337,12 +330,12 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
         k_mid[frozen] = 0.0
         changed = (ell_a != ell) | (ell_b != ell) | np.any(k_mid[j] != 0, 1) | np.any(k_mid[j + 1] != 0, 1)
         with_arc = changed & ~lines  # arcs take part: measure against the arc itself
-        found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, k_mid, corner, with_arc)
+        found, kept, kept_pts = _blend_round(spans, arrays, j, ell_a, ell_b, k_mid, corner, with_arc)
         dev = found["dev"].copy()
         other = np.flatnonzero(with_arc | (changed & ~np.isfinite(dev)))  # (and where the kernel could not tell)
         if other.size:
             pts = kept_pts[np.searchsorted(kept, other)]
-            dev[other] = _deviation(spans, j[other], ell_a[other], ell_b[other], _coeffs(pts))
+            dev[other] = _deviation(spans, arrays, j[other], ell_a[other], ell_b[other], _coeffs(pts))
             del pts
         bad = np.flatnonzero(changed & (dev > tol[j]))
         if bad.size == 0:
@@ -351,8 +344,8 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     else:  # still too far: plain symmetric blends everywhere (within tol by construction or measurement)
         found = kept = kept_pts = None
         ell_a, ell_b = ell.copy(), ell.copy()
-        found, kept, kept_pts = _blend_round(spans, j, ell_a, ell_b, None, corner, np.zeros(j.size, bool))
-    del k_mid, corner, frozen, dev, changed
+        found, kept, kept_pts = _blend_round(spans, arrays, j, ell_a, ell_b, None, corner, np.zeros(j.size, bool))
+    del k_mid, corner, frozen, dev, changed, arrays
     fields_, table, owner = _blend_fields(spans, j, found, kept, kept_pts)
     del found, kept, kept_pts  # the blends' fields hold what is kept of them
     trim_start, trim_end = _trims(len(spans), j, ell_a, ell_b)
