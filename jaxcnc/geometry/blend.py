@@ -302,9 +302,8 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
     # line–line: the deviation is (3/8) ℓ sin(θ/2) exactly; elsewhere measure and shrink
     check = np.flatnonzero(~lines)
     keep = np.ones(j.size, bool)
-    arrays = span_arrays(
-        spans
-    )  # what the blends' points and deviations evaluate, made once (dropped before the fields)
+    # what the blends' points and deviations evaluate, made once (dropped before the fields)
+    arrays = span_arrays(spans)
     for _ in range(SHRINK_ROUNDS):
         if check.size == 0:
             break
