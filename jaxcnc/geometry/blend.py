@@ -337,8 +337,9 @@ def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
             dev[other] = _deviation(spans, arrays, j[other], ell_a[other], ell_b[other], _coeffs(pts))
             del pts
         # the corner kernel's bound is at most ~1.25x the distance, now and then more: where it says a blend leaves
-        # tol, the deviation kernel's bound (also an upper bound; often tighter there) decides with it
-        over = np.flatnonzero(changed & ~with_arc & np.isfinite(dev) & (dev > tol[j]))
+        # tol, the deviation kernel's bound (also an upper bound; often tighter there) decides with it (the rows
+        # measured just above have it already)
+        over = np.flatnonzero(changed & ~with_arc & np.isfinite(found["dev"]) & (dev > tol[j]))
         if over.size:
             pts, _, _ = _blend_points(spans, j[over], ell_a[over], ell_b[over], k_mid, arrays)
             dev[over] = np.minimum(
