@@ -76,6 +76,34 @@ def test_gcode_feed_that_underflows_is_refused():
     assert (info.value.line, info.value.column) == (1, 1) and "feed" in info.value.reason
 
 
+#: Curved blocks short enough to turn by less than a grid interval's 1 degree, alone between two rests (found by a
+#: red-team pass on 2026-11-28): each was one interval with s-double-dot constant, so it stayed at rest and its
+#: trapezoid covered it in no time - the table jumped to its end in one tick (10 kHz: |a| = 1e5 mm/s^2; 1 kHz: within
+#: the limits, the cut silently lost).
+TINY_CURVES = {
+    "1 um arc": "G0 X11 Y10\nG1 F9000\nG3 X10.999 Y10 I0 J-0.1\n",
+    "helix, 50 nm in XY and 1 mm in Z": "G0 X11 Y10\nG1 F9000\nG3 X10.99995 Y10 Z1 I0 J-1\n",
+    "steep 19 deg helix": "G0 X11 Y10\nG1 F9000\nG2 X11.010261 Y9.998191 Z-0.45 I0 J-0.03\n",
+    "1 um arc between exact stops": "G61\nG0 X11 Y10\nG1 F9000 X12\nG3 X11.999 Y10 I0 J-0.1\nG1 X12 Y11\n",
+}
+
+
+@pytest.mark.parametrize("tick_hz", [10000, 1000])
+@pytest.mark.parametrize("name", TINY_CURVES)
+def test_a_tiny_curve_between_rests_takes_the_time_its_acceleration_needs(tmp_path, name, tick_hz):
+    from tests.helpers import table_of
+
+    m = parse_machine(machine_text(tick_hz=tick_hz), "test-machine.toml")
+    job, _, meas = table_of(TINY_CURVES[name], m, tmp_path)
+    assert meas.ok, meas.violations[:3]
+    arc = np.flatnonzero(job.program.kind == Kind.ARC)[0]
+    on = job.spans.block[job.plan.span] == arc
+    length = float(job.plan.length[on].sum())
+    # from rest to rest along a path whose tangent is a unit vector, |q''| >= |s''|: t >= 2 sqrt(L / |a|max)
+    a_bound = float(np.linalg.norm([a.a_max for a in m.axes]))
+    assert length > 0 and job.plan.duration_s[on].sum() >= 2.0 * np.sqrt(length / a_bound)
+
+
 def test_gcode_arc_turns_are_bounded():
     with pytest.raises(SourceError, match="turns"):
         parse_gcode("G2 X0 Y0 I1 F100 P1000000000\n", "t.ngc")
