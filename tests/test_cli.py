@@ -170,3 +170,28 @@ def test_unknown_planner(tmp_path, capsys):
     prog.write_text("G1 X1 F60\n")
     assert main(["plan", str(prog), "-m", str(EXAMPLE_MACHINE), "-o", str(tmp_path / "o.ticks"), "--planner", "x"]) == 2
     assert "unknown planner 'x'; known: casadi, lookahead, topp, toppra" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("failing", [False, True])
+def test_a_reader_that_leaves_early_gets_no_traceback_and_the_status_stays(tmp_path, failing):
+    """``jaxcnc check t.ticks | head -1``: the reader closes the pipe before the command has written; the command
+    still exits with its check's status (0 passed, 1 failed), and says nothing of a broken pipe."""
+    machine = tmp_path / "m.toml"
+    machine.write_text(machine_text())
+    program = tmp_path / "p.ngc"
+    program.write_text("G1 X10 Y5 F3000\nG1 X0\n")  # 50 mm/s
+    table = tmp_path / "p.ticks"
+    assert main(["plan", str(program), "-m", str(machine), "-o", str(table), "--quiet"]) == 0
+    against = machine
+    if failing:  # the same table against a machine half as fast
+        against = tmp_path / "slow.toml"
+        against.write_text(machine_text(v=20.0))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxcnc", "check", str(table), "-m", str(against)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()  # the reader is gone before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == (1 if failing else 0), err
+    assert "Traceback" not in err and "BrokenPipe" not in err

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import io
 import json
+import os
 import sys
 from contextlib import nullcontext
 from importlib import resources
@@ -984,7 +986,55 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+class _ReaderMayLeave(io.TextIOBase):
+    """The process's stdout, quiet once its reader has closed the pipe (``jaxcnc check t.ticks | head -1``): the
+    command finishes its work and exits with its own status instead of a ``BrokenPipeError`` traceback (the rest
+    of its output goes to ``/dev/null``)."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self.stream.write(text)
+        except BrokenPipeError:
+            self._to_null()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self.stream.flush()
+        except BrokenPipeError:
+            self._to_null()
+
+    def _to_null(self) -> None:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, self.stream.fileno())  # what is still buffered, and the interpreter's flush at exit, land there
+        os.close(null)
+
+    def fileno(self) -> int:
+        return self.stream.fileno()
+
+    def isatty(self) -> bool:
+        return self.stream.isatty()
+
+    @property
+    def encoding(self) -> str:
+        return self.stream.encoding
+
+
 def main(argv: list[str] | None = None) -> int:
+    if sys.stdout is sys.__stdout__ and sys.stdout is not None:  # (not where a caller captures it)
+        sys.stdout = _ReaderMayLeave(sys.stdout)
+    try:
+        return _main(argv)
+    finally:
+        if isinstance(sys.stdout, _ReaderMayLeave):
+            sys.stdout.flush()
+            sys.stdout = sys.stdout.stream
+
+
+def _main(argv: list[str] | None) -> int:
     args = build_parser().parse_args(argv)
     for module in getattr(args, "needs", ()):  # before anything is written
         if importlib.util.find_spec(module) is None:
