@@ -180,6 +180,11 @@ _ALLOWED = set("GMFSTNPQXYZIJKRLH")
 _MOTION_GROUP = 1
 
 
+def _written_against(before: Word, w: Word) -> bool:
+    """Word ``w`` follows ``before``'s number with nothing between them (``X1e3``: ``X1`` then ``E3``)."""
+    return before.column + 1 + len(before.text) == w.column and before.text[-1:].isdigit()
+
+
 def _block_kind(code: int, dialect: Dialect, block: _Block, w: Word) -> BlockKind | None:
     """The registered block kind of G code ``code`` (tenths), ``None`` when there is none; an error when its
     kind does not belong to ``dialect``."""
@@ -252,9 +257,15 @@ class _Block:
         self.kinds: dict[int, BlockKind] = {}  # the block's plug-in motion words (jaxcnc.blocks), by code
         g_groups: dict[int, Word] = {}
         m_groups: dict[int, Word] = {}
-        for w in words:
+        for i, w in enumerate(words):
             if w.letter not in _ALLOWED and w.letter not in dialect.addresses:
                 why = _LETTER_REASONS.get(w.letter)
+                if w.letter == "E" and i and _written_against(words[i - 1], w):
+                    number = f"{words[i - 1].letter}{words[i - 1].text}"
+                    why = (
+                        f"exponent notation is not RS274NGC ({number}E{w.text} reads as {number} and E{w.text}): "
+                        "write the number out"
+                    )
                 raise self.error(w, f"unsupported word {w.letter}{w.text}" + (f": {why}" if why else ""))
             if w.letter in "GM":
                 if not abs(w.value) < 1e6:  # no G or M code is this large (and its tenths must stay an int)
