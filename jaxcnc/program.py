@@ -160,9 +160,10 @@ class Program:
         power: ``(n,)`` float64, the S word in effect (the laser's power scale).
         dwell_s: ``(n,)`` float64 seconds (DWELL rows).
         stop_before: ``(n,)`` bool, the motion must be at rest when this row starts
-            (exact stop mode, laser switched, tool change, pause).
-        blend_tol: ``(n,)`` float64 mm, G64 P tolerance (``inf`` = G64 without P,
-            0 = G61 exact path).
+            (the row before it programmed under G61.1 exact stop, laser switched, tool change, pause).
+        blend_tol: ``(n,)`` float64 mm, the G64 P tolerance the row is programmed under (``inf`` = G64 without P,
+            0 = G61 exact path, G61.1): how the row *ends* — the junction after it is blended within the lower
+            of its and the next row's tolerance (the next row's only where it has one), not at all where it is 0.
         event, event_value: ``(n,)`` int8 :class:`Event` and its value (tool number).
         line: ``(n,)`` int32 1-based source line of the block.
         curve: ``(n,)`` int32 row of :attr:`curves` for CURVE rows, -1 otherwise.

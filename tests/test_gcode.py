@@ -110,7 +110,8 @@ def test_path_control_modes():
     p = parse("G64 P0.02 Q0.01\nG1 X1 F60\nG61\nG1 X2\nG64\nG1 X3\nG61.1\nG1 X4\nG1 X5\n")
     assert p.blend_tol[0] == pytest.approx(0.02)
     assert p.blend_tol[1] == 0.0 and math.isinf(p.blend_tol[2])
-    assert list(p.stop_before) == [True, False, False, True, True]  # G61.1 stops at every junction
+    # a move programmed under G61.1 ends at rest (the move after it starts there): X4 blends in, X5 starts at rest
+    assert list(p.stop_before) == [True, False, False, False, True]
 
 
 def test_g28_home():

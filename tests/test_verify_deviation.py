@@ -320,13 +320,15 @@ def test_curve_distance_against_dense_sampling() -> None:
 
 
 def test_junction_tolerances_follow_the_program() -> None:
+    """The mode a move is programmed in says how it ends: a junction gets the lower of its two rows' tolerances (the
+    second's only where it has one), none after a row programmed under G61."""
     machine = make_machine()
     text = (
         "G21 G90 G64 P0.05\nG1 X10 F600\nX10 Y10\n"  # rows 0, 1: junction 0-1 P0.05
-        "G64 P0.2\nX0 Y10\n"  # row 2: junction 1-2 P0.2 (the row after the corner)
-        "G61\nX0 Y0\n"  # row 3: exact
+        "G64 P0.2\nX0 Y10\n"  # row 2: junction 1-2 the lower, P0.05
+        "G61\nX0 Y0\n"  # row 3: junction 2-3 P0.2 (row 3 has none of its own); 3-4 exact
         "G64\nX5 Y0\n"  # row 4: the machine's corner_tol_mm (0 here)
-        "G64 P0.1\nX5 Y5\nX5 Y5\n"  # rows 5, 6: P0.1; row 6 does not move
+        "G64 P0.1\nX5 Y5\nX5 Y5\n"  # rows 5, 6: P0.1 (4-5: the lower, 0); row 6 does not move
         "X6 Y6\nG4 P1\nX8 Y6\n"  # row 7; row 8 dwells: no blend across it; row 9
         "M3 S100\nX9 Y9\n"  # row 10: the laser switched: at rest
     )
@@ -335,10 +337,10 @@ def test_junction_tolerances_follow_the_program() -> None:
     assert list(geo.moving) == [True] * 6 + [False, True, False, True, True]
     np.testing.assert_array_equal(geo.prev, [-1, 0, 1, 2, 3, 4, 5, 5, 7, 7, 9])
     np.testing.assert_array_equal(geo.next, [1, 2, 3, 4, 5, 7, 7, 9, 9, 10, -1])
-    np.testing.assert_allclose(geo.tol_in, [0, 0.05, 0.2, 0, 0, 0.1, 0.1, 0.1, 0, 0, 0])
-    np.testing.assert_allclose(geo.allowed, [0.05, 0.2, 0.2, 0, 0.1, 0.1, 0.1, 0.1, 0, 0, 0])
+    np.testing.assert_allclose(geo.tol_in, [0, 0.05, 0.05, 0.2, 0, 0, 0.1, 0.1, 0, 0, 0])
+    np.testing.assert_allclose(geo.allowed, [0.05, 0.05, 0.2, 0.2, 0, 0.1, 0.1, 0.1, 0, 0, 0])
     geo = ProgramPath(pr, corner_tol_mm=0.03)
-    assert geo.allowed[3] == 0.03 and geo.allowed[4] == 0.1 and geo.tol_in[4] == 0.03
+    assert geo.allowed[3] == 0.2 and geo.allowed[4] == 0.03 and geo.tol_in[4] == 0 and geo.tol_in[5] == 0.03
 
 
 # ----------------------------------------------------------------------------------------------

@@ -296,9 +296,9 @@ def _run(table: PlainTable, a: int, b: int, lines: np.ndarray, st: RunState) -> 
             return k, bool(np.isin(k, rows[odd])), RunResult(0)
         fr = feed_raw[rows]
         feed = np.where((rm == 0) | np.isnan(fr), np.nan, fr * st.scale / 60.0)
-    stop = np.full(m, st.exact_stop)
+    stop = np.full(m, st.exact_stop)  # each row after a move programmed under G61.1 starts at rest
     if m:
-        stop[0] = st.pending_stop or st.exact_stop
+        stop[0] = st.pending_stop
     columns = {
         "kind": kind,
         "start": start,

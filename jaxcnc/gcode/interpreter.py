@@ -372,7 +372,7 @@ class _Interpreter:
         r["laser"].append(s.laser)
         r["power"].append(s.power)
         r["dwell_s"].append(dwell_s)
-        r["stop_before"].append(s.pending_stop or s.exact_stop or kind in (Kind.DWELL, Kind.EVENT))
+        r["stop_before"].append(s.pending_stop or kind in (Kind.DWELL, Kind.EVENT))
         r["blend_tol"].append(0.0 if s.exact_stop else s.blend_tol)
         r["event"].append(event)
         r["event_value"].append(event_value)
@@ -380,8 +380,10 @@ class _Interpreter:
         r["curve"].append(curve)
         r["plane"].append(s.plane if plane is None else plane)
         s.pos = np.asarray(end, dtype=np.float64).copy()
-        # Rows that stand still (dwell, events) leave the machine at rest for the next one.
-        s.pending_stop = kind in (Kind.DWELL, Kind.EVENT)
+        # Rows that stand still (dwell, events) leave the machine at rest for the next one, and so does a move
+        # programmed under G61.1: the mode a move is programmed in says how it ends (LinuxCNC's termination
+        # condition), not how the next one starts.
+        s.pending_stop = kind in (Kind.DWELL, Kind.EVENT) or s.exact_stop
 
     # -- one block --------------------------------------------------------------------------
     def block(self, b: _Block) -> None:
@@ -1049,7 +1051,7 @@ class _Interpreter:
         if res.columns is not None and res.columns["kind"].size:
             self.flush_rows()
             self.chunks.append(res.columns)
-            s.pending_stop = False
+            s.pending_stop = s.exact_stop  # (as after a row of its own)
         s.pos = res.pos
         s.motion, s.feed_raw, s.power = res.motion, res.feed_raw, res.power
         if res.any_words:

@@ -72,8 +72,13 @@ def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) ->
         (program.laser[r1] == program.laser[r2]) & (program.power[r1] == program.power[r2]),
         ~lit[r1] & ~lit[r2],
     )
-    prog_tol = program.blend_tol[r2]
-    tol = np.where(np.isinf(prog_tol), corner_tol_mm, prog_tol)
+    # The mode a move is programmed in says how it ends (LinuxCNC's termination condition): under G61/G61.1 (or
+    # G64 P0) the first move ends on its end point; else the lower tolerance of the two moves (LinuxCNC takes
+    # the smaller "in case it dropped between moves"), the second one's only where it has one of its own.
+    tol_a, tol_b = program.blend_tol[r1], program.blend_tol[r2]
+    own_b = np.where(np.isinf(tol_b), corner_tol_mm, tol_b)
+    tol = np.where(np.isinf(tol_a), corner_tol_mm, tol_a)
+    tol = np.where(tol_a > 0, np.minimum(tol, np.where(tol_b > 0, own_b, np.inf)), 0.0)
     ok = blendable & (r1 != r2) & ~program.stop_before[r2] & same_beam & (tol > 0)
     return np.where(ok, tol, 0.0)
 

@@ -18,10 +18,12 @@ What is compared with what, tick by tick:
   ``P`` and ``N`` (moving: a line of non-zero length, an arc or a spline; dwells, events and zero-length
   moves are skipped). The distance is the smallest of the three distances. Rows that do not move (dwell,
   event, zero-length line) are the point where they stand.
-* **Tolerance allowed.** The tolerance of the junction between consecutive moving rows ``a < b`` is that
-  of the row after it: ``blend_tol[b]`` (G64 P), the machine's ``corner_tol_mm`` where it is ``inf``
-  (G64 without P), and 0 — an exact corner — where any row in ``a+1 .. b`` must start at rest
-  (``stop_before``: G61.1, the laser switched, a dwell, an event) or where there is no row on one side.
+* **Tolerance allowed.** The tolerance of the junction between consecutive moving rows ``a < b`` is the lower
+  of the two rows' ``blend_tol`` (G64 P; the machine's ``corner_tol_mm`` where it is ``inf``, G64 without P),
+  the second row's only where it has one: the mode a move is programmed in says how it ends, so 0 — an exact
+  corner — after a row programmed under G61, G61.1 or G64 P0 (``blend_tol[a]`` = 0), and where any row in
+  ``a+1 .. b`` must start at rest (``stop_before``: after G61.1, the laser switched, a dwell, an event) or where
+  there is no row on one side.
   A tick of a moving row ``r`` may lie up to ``max(J(P, r), J(r, N))`` from the geometry; a tick of a row
   that does not move up to ``J(P, N)``. On top of that a numeric slack of :data:`SLACK_MM` (1e-6 mm).
   G61 (exact path) therefore allows 1e-6 mm everywhere. A table shaped against vibration (issue 20) is allowed,
@@ -380,15 +382,17 @@ class ProgramPath:
         self.prev = np.concatenate([[-1], prev_incl[:-1]]).astype(np.int64)
         after = np.concatenate([next_incl[1:], [n]]).astype(np.int64)
         self.next = np.where(after < n, after, -1)
-        # junction tolerances: that of the row after the junction, 0 where a row in between starts at rest
+        # junction tolerances: 0 after a row programmed without one (G61, G61.1, G64 P0) and where a row in between
+        # starts at rest, else the lower of the two rows' (the second's only where it has one)
         stops = np.concatenate([[0], np.cumsum(pr.stop_before.astype(np.int64))])  # stops[i]: in rows < i
         tol_of = np.where(np.isinf(pr.blend_tol), corner_tol_mm, pr.blend_tol)
+        tol_after = np.where(pr.blend_tol > 0, tol_of, np.inf)
 
         def junction(a: np.ndarray, b: np.ndarray) -> np.ndarray:
             ok = (a >= 0) & (b >= 0)
             a_, b_ = np.where(ok, a, 0), np.where(ok, b, 0)
             stop = stops[b_ + 1] - stops[a_ + 1] > 0
-            return np.where(ok & ~stop, tol_of[b_], 0.0)
+            return np.where(ok & ~stop & (pr.blend_tol[a_] > 0), np.minimum(tol_of[a_], tol_after[b_]), 0.0)
 
         self.tol_in = np.where(self.moving, junction(self.prev, idx), junction(self.prev, self.next))
         self.tol_out = np.where(self.moving, junction(idx, self.next), 0.0)
