@@ -155,7 +155,8 @@ def test_blends_are_g2_continuous():
 
 
 def test_laser_switch_and_exact_stop_keep_the_corner():
-    text = "G64 P0.05\nM3 S100\nG1 X10 F600\nS50\nX10 Y10\nS50\nG61\nX20 Y10\n"
+    # the power changes at the first corner; the move into the second is programmed under G61 (which says how it ends)
+    text = "G64 P0.05\nM3 S100\nG1 X10 F600\nS50\nG61\nX10 Y10\nS50\nX20 Y10\n"
     sp = build_spans(parse_gcode(text, "b.ngc"))
     assert not np.any(sp.kind == SpanKind.BLEND)
 
