@@ -40,6 +40,17 @@ def test_a_line_at_the_axis_speed_limit_keeps_its_s_curve_time(tmp_path, move):
     assert meas.max_abs_v["x"] > 0.999 * 100
 
 
+def test_the_s_curve_window_is_that_of_the_axes_that_move(tmp_path):
+    """y's A/J (0.04 s) is larger than x's (0.025 s), but a program that moves x alone is averaged over x's."""
+    m = make_machine(v=100, a=1000, a_y=1600, j=40_000)
+    job, _, meas = table_of("G1 X100 F3000\nM2\n", m, tmp_path)
+    assert meas.ok, meas.violations[:3]
+    expected = 100 / 50 + 50 / 1000 + 1000 / 40_000
+    assert expected - 1e-9 <= job.plan.total_time_s <= expected + 5 / m.tick_hz
+    job, _, meas = table_of("G1 X100 Y1 F3000\nM2\n", m, tmp_path, "xy.ticks")  # y moves: its A/J counts
+    assert meas.ok and job.plan.total_time_s > expected + 0.01
+
+
 def test_jerk_limited_curve_keeps_every_limit(tmp_path):
     """A random cubic NURBS (sharp curvature changes): every limit at every tick, the jerk limit used."""
     curve = random_cubic_nurbs(12, seed=3)

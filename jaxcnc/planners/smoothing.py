@@ -345,7 +345,8 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     :func:`~jaxcnc.planners.protocol.with_margin`), lowered feeds and — if it declares ``honours_holds`` —
     the held minima; the result is measured against the machine's own limits.
 
-    The window starts at ``W = A/J`` (the largest over the axes). The speed minima of the plan are held
+    The window starts at ``W = A/J`` (the largest over the axes that move: an axis's jerk is ``T_i`` times the swing
+    of ``s̈`` over ``W``, at most ``A_i / W``). The speed minima of the plan are held
     flat (:func:`minima_holds`) and the program planned again. Where the averaged table still breaks a
     limit, jerk excess first widens the window (up to 2×) while that helps; then, on curves and at
     their junctions (the ``3 K ṡ s̈ + K' ṡ³`` terms), those spans and their curved neighbours get a lower
@@ -359,6 +360,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     v_max, a_max, j_max = machine_limits(request.machine)  # what the table is verified against
     span_s0 = spans.s0
     feed = np.asarray(request.feed_mm_s, dtype=np.float64).copy()
+    moves = np.any(spans.hi - spans.lo > 0, axis=0) if len(spans) else np.zeros(len(v_max), bool)  # (per axis)
 
     def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, np.ndarray]:
         a = a_max * alpha
@@ -369,8 +371,8 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                 f"planner {planner.name!r} returned a {type(base).__name__}; the S-curve stage (j_max is set) "
                 "averages a Plan's trapezoids: return a Plan, or declare handles_jerk = True"
             )
-        with np.errstate(invalid="ignore"):
-            ratio = np.where(np.isfinite(j_max) & np.isfinite(a), a / (j_max * margin), 0.0)
+        with np.errstate(invalid="ignore"):  # (an axis that never moves has no jerk: its A/J does not count)
+            ratio = np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
         window = max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
         sp = smooth(base, window, span_s0, alpha)
         # a and j are compared with the margin; speeds with the limit itself, but for the rounding of the finite
