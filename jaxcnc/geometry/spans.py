@@ -146,6 +146,11 @@ class Spans:
         return np.cumsum(self.length) - self.length
 
     @property
+    def moving_axes(self) -> np.ndarray:
+        """``(3,)`` bool: the axes some span moves along (its extent is not a point on that axis)."""
+        return np.any(self.hi - self.lo > 0, axis=0)
+
+    @property
     def start(self) -> np.ndarray:
         """``(n, 3)`` start points."""
         return self.origin

@@ -360,7 +360,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     v_max, a_max, j_max = machine_limits(request.machine)  # what the table is verified against
     span_s0 = spans.s0
     feed = np.asarray(request.feed_mm_s, dtype=np.float64).copy()
-    moves = np.any(spans.hi - spans.lo > 0, axis=0) if len(spans) else np.zeros(len(v_max), bool)  # (per axis)
+    moves = spans.moving_axes
 
     def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, np.ndarray]:
         a = a_max * alpha

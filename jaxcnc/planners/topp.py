@@ -588,7 +588,7 @@ class _ProgramFacts:
         )
         x_junction = np.asarray(x_junction)[: n - 1]
         zero = np.zeros(1)
-        moves = np.any(spans.hi - spans.lo > 0, axis=0) & np.isfinite(req.a_max)
+        moves = spans.moving_axes & np.isfinite(req.a_max)
         return _ProgramFacts(
             at_kink=np.asarray(at_kink)[:n],
             cap_start=np.concatenate([zero, x_junction]),  # rest before the first span and after the last
@@ -731,20 +731,19 @@ def _solve_refined(
             out = _solve_grid(req, facts, grid, x_start)
             arcs = np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC)
             bad = grid_excess(arrays, grid, out, req.a_max, facts.axes, at, "arc" if arcs else None)
-        bad = bad | _stalled(req.spans, grid, out["x_node"])
+        bad = bad | _stalled(curved[grid.span - first], grid, out["x_node"])
         if not bad.any():
             return grid, out
         counts[np.unique(grid.span[bad])] *= REFINE_FACTOR
     raise PlanningError(f"the grid did not settle in {MAX_REFINE} refinements (a planner bug; please report it)")
 
 
-def _stalled(spans: Spans, grid: Grid | _Intervals, x_node: np.ndarray) -> np.ndarray:
-    """``(m,)`` curved intervals of some length at rest at both ends: ``s̈`` is constant on a curved interval, so
-    ``x`` stays 0 all along it and its trapezoid would cover the interval in no time. A curved span alone
-    between two rests (a 1 µm arc between two stops turns by less than ``MAX_TURN_RAD``: one interval) needs a
-    node inside to move; cut finer, it gets one."""
+def _stalled(curved: np.ndarray, grid: Grid | _Intervals, x_node: np.ndarray) -> np.ndarray:
+    """``(m,)`` curved intervals (``curved``, ``(m,)``) of some length at rest at both ends: ``s̈`` is constant on a
+    curved interval, so ``x`` stays 0 all along it and its trapezoid would cover the interval in no time. A curved
+    span alone between two rests (a 1 µm arc between two stops turns by less than ``MAX_TURN_RAD``: one interval)
+    needs a node inside to move; cut finer, it gets one."""
     m = len(grid)
-    curved = is_curved(spans.kind[grid.span])
     return curved & (grid.delta > 0) & (x_node[:m] <= 0.0) & (x_node[1 : m + 1] <= 0.0)
 
 
