@@ -5,9 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.geometry.path import build_spans
+from jaxcnc.gcode import parse_gcode
 from jaxcnc.io.curves import curves_program
 from jaxcnc.planners import plan_job, register_planner
-from jaxcnc.planners.smoothing import SmoothPlan
+from jaxcnc.planners.job import _span_feed
+from jaxcnc.planners.protocol import machine_limits
+from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops
 from tests.conftest import make_machine
 from tests.helpers import random_cubic_nurbs, table_of
 from tests.test_curves import table_of_program
@@ -68,17 +73,59 @@ def test_corner_blends_with_jerk_limits(tmp_path):
     m = make_machine(a=1000, j=20_000)
     square = "G1 X10 F3000\nY10\nX0\nY0\nM2\n"
     exact = table_of("G61\n" + square, m, tmp_path, "g61.ticks")[0]
-    times = {}
+    times, blends = {}, {}
     for tol in (0.05, 0.5):
         job, table, meas = table_of(f"G64 P{tol}\n" + square, m, tmp_path, f"p{tol}.ticks")
+        blends[tol] = int(np.count_nonzero(job.spans.kind == SpanKind.BLEND))
         assert meas.ok, meas.violations[:3]
         p = table.exact_mm()[:, :2]
         # every tick within the tolerance of the square's outline
         d = np.minimum.reduce([np.abs(p[:, 0]), np.abs(p[:, 0] - 10), np.abs(p[:, 1]), np.abs(p[:, 1] - 10)])
         assert d.max() <= tol + 1e-6
         times[tol] = job.plan.total_time_s
-    # a blend must change its curvature within its length: under a jerk limit a wide blend is the fast one
-    assert times[0.5] < exact.plan.total_time_s < times[0.05]
+    # a blend must change its curvature within its length: under a jerk limit a wide blend is the fast one; a
+    # narrow one is passed slower than a stop (blended 1.236 s against 1.201 s until 2026-11-28), so its corners
+    # stay exact (blends_slower_than_stops) and it takes the exact square's time
+    assert times[0.5] < exact.plan.total_time_s and blends[0.5] > 0
+    assert blends[0.05] == 0 and times[0.05] == exact.plan.total_time_s
+
+
+def test_a_blend_passed_slower_than_a_stop_is_kept_exact():
+    """Under a jerk limit a 90° corner at P0.01 (its blend turns within 75 µm: ~3 mm/s) stops; a 1° kink keeps its
+    blend (passed at the feed), and so does the 90° corner without a jerk limit."""
+    # east, a 90° turn north, then two 1° kinks (100 tan 1° = 1.7455, 100 tan 2° = 3.4921)
+    program = parse_gcode("G64 P0.01\nG1 X100 F6000\nY100\nX101.7455 Y200\nX105.2376 Y300\nM2\n", "t.ngc")
+    north = int(np.flatnonzero(program.end[:, 1] == 100)[0])  # the row after the 90° corner
+    for j, exact_rows in ((1e5, [north]), (None, [])):
+        m = make_machine(v=250, a=3000, j=j)
+        spans = build_spans(program, m.path.corner_tol_mm)
+        exact = blends_slower_than_stops(spans, _span_feed(program, spans, m), *machine_limits(m), len(program))
+        assert list(np.flatnonzero(exact)) == exact_rows
+
+
+def test_a_serpentine_plans_at_once_and_alike_at_any_tick_rate(tmp_path):
+    """100 mm lines with 0.1 mm step-overs at P0.01 on a cutter with j_max: the corners' blends would be passed at
+    ~3 mm/s, slower than stops, so the corners stop; planned without the S-curve stage's fallback (8.18 s at 1 kHz
+    and 10.10 s at 10 kHz for ten lines before 2026-11-28, against 5.74–5.77 s now), within 1 % at 1 and 10 kHz."""
+    lines, y = ["G64 P0.01", "G1 F15000"], 0.0
+    for i in range(4):
+        y += 0.1
+        lines += [f"X{100 if i % 2 == 0 else 0}", f"Y{y:.1f}"]
+    text = "\n".join(lines) + "\nM2\n"
+    times = {}
+    for hz in (1000, 10000):
+        m = make_machine(tick_hz=hz, v=250, a=3000, rapid=250, j=1e5)
+        job, _, meas = table_of(text, m, tmp_path, f"s{hz}.ticks")
+        assert meas.ok, meas.violations[:3]
+        assert not np.any(job.spans.kind == SpanKind.BLEND)
+        times[hz] = job.plan.total_time_s
+    # each move its own rest-to-rest group: a trapezoid and one window (A/J = 0.03 s) each
+    lines_s = 100 / 250 + 250 / 3000 + 0.03
+    steps_s = 2 * np.sqrt(0.1 / 3000) + 0.03
+    expected = 4 * (lines_s + steps_s)
+    assert abs(times[10000] / times[1000] - 1) <= 0.01
+    for t in times.values():
+        assert expected <= t <= expected * 1.01
 
 
 def test_casadi_reference_with_jerk_rows(tmp_path):

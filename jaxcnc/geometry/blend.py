@@ -58,8 +58,14 @@ CHAIN_ROUNDS = 4
 SNAP = 0.25
 
 
-def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) -> np.ndarray:
-    """``(n-1,)`` blend tolerance (mm) of each junction between consecutive spans (0: not blended)."""
+def junction_tolerances(
+    program: Program, spans: Spans, corner_tol_mm: float, exact_before: np.ndarray | None = None
+) -> np.ndarray:
+    """``(n-1,)`` blend tolerance (mm) of each junction between consecutive spans (0: not blended).
+
+    ``exact_before``: ``(rows,)`` bool, the junctions into these rows are kept exact as well (a planner's choice,
+    such as the S-curve stage's where a blend would be passed slower than a stop: :func:`~jaxcnc.planners.
+    smoothing.blends_slower_than_stops`)."""
     n = len(spans)
     if n < 2:
         return np.zeros(0)
@@ -80,6 +86,8 @@ def junction_tolerances(program: Program, spans: Spans, corner_tol_mm: float) ->
     tol = np.where(np.isinf(tol_a), corner_tol_mm, tol_a)
     tol = np.where(tol_a > 0, np.minimum(tol, np.where(tol_b > 0, own_b, np.inf)), 0.0)
     ok = blendable & (r1 != r2) & ~program.stop_before[r2] & same_beam & (tol > 0)
+    if exact_before is not None:
+        ok &= ~exact_before[r2]
     return np.where(ok, tol, 0.0)
 
 
@@ -293,9 +301,9 @@ def _chain_curvature(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.n
     return k_mid
 
 
-def blend_path(program: Program, spans: Spans, corner_tol_mm: float) -> Spans:
+def blend_path(program: Program, spans: Spans, corner_tol_mm: float, exact_before: np.ndarray | None = None) -> Spans:
     """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring)."""
-    tol = junction_tolerances(program, spans, corner_tol_mm)
+    tol = junction_tolerances(program, spans, corner_tol_mm, exact_before)
     t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
     turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
     j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))

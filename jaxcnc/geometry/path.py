@@ -7,14 +7,18 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from jaxcnc.geometry.blend import blend_path
 from jaxcnc.geometry.spans import Spans, program_spans
 from jaxcnc.program import Program
 
 
-def build_spans(program: Program, corner_tol_mm: float = 0.0) -> Spans:
-    """The spans of ``program`` in path order, junctions blended within the tolerance (0: exact corners)."""
-    return blend_path(program, program_spans(program), corner_tol_mm)
+def build_spans(program: Program, corner_tol_mm: float = 0.0, exact_before: np.ndarray | None = None) -> Spans:
+    """The spans of ``program`` in path order, junctions blended within the tolerance (0: exact corners).
+
+    ``exact_before``: ``(rows,)`` bool, junctions into these rows kept exact too (where a planner asks)."""
+    return blend_path(program, program_spans(program), corner_tol_mm, exact_before)
 
 
 __all__ = ["build_spans"]

@@ -17,9 +17,16 @@ from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.memory import release_free_heap
-from jaxcnc.planners.protocol import Planner, PlanRequest, TimeLaw, coordinate_extent_mm, request_limits
+from jaxcnc.planners.protocol import (
+    Planner,
+    PlanRequest,
+    TimeLaw,
+    coordinate_extent_mm,
+    machine_limits,
+    request_limits,
+)
 from jaxcnc.planners.registry import DEFAULT_PLANNER, PLANNERS, resolve_planner
-from jaxcnc.planners.smoothing import jerk_limited
+from jaxcnc.planners.smoothing import blends_slower_than_stops, jerk_limited
 from jaxcnc.program import PROGRAM_AXES, Kind, Program
 
 
@@ -97,6 +104,14 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
 TRIM_BLOCKS = 1 << 18
 
 
+def _span_feed(program: Program, spans: Spans, machine: MachineConfig) -> np.ndarray:
+    """``(n,)`` the programmed speed of each span: its row's feed (the machine's default where none is set), or
+    the machine's rapid cap on a rapid."""
+    rows = spans.block
+    feed = program.feed[rows]
+    return np.where(program.rapid[rows], machine.path.rapid, np.where(np.isnan(feed), machine.path.feed, feed))
+
+
 def machine_planner(machine: MachineConfig) -> str:
     """The contour planner ``machine`` names (``[machine] planner``), or :data:`DEFAULT_PLANNER`."""
     return machine.planner or DEFAULT_PLANNER
@@ -122,20 +137,26 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)
+    s_curve = np.any(np.isfinite(machine_limits(machine)[2])) and not chosen.handles_jerk
+    if s_curve:  # under jerk limits, corners whose blend is passed slower than a stop are kept exact
+        exact = blends_slower_than_stops(
+            spans, _span_feed(program, spans, machine), *machine_limits(machine), len(program)
+        )
+        if exact.any():
+            with planning_scope():
+                spans = build_spans(program, machine.path.corner_tol_mm, exact_before=exact)
     rows = spans.block
-    rapid = program.rapid[rows]
-    prog_feed = program.feed[rows]
-    feed = np.where(rapid, machine.path.rapid, np.where(np.isnan(prog_feed), machine.path.feed, prog_feed))
+    feed = _span_feed(program, spans, machine)
     dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     stop = program.stop_before[rows] & first_of_block
-    del rapid, prog_feed, first_of_block  # (n,) each: not kept alive through the plan
+    del first_of_block  # (n,): not kept alive through the plan
     # the machine's limits less the margin, applied here once (none on v and a where rounding cannot reach them)
     v_max, a_max, j_max = request_limits(machine, coordinate_extent_mm(spans))
     request = PlanRequest(spans, feed, dwell, stop, v_max, a_max, machine, j_max=j_max)
     try:
         with planning_scope():  # sequential passes: on the host CPU (see jaxconfig)
-            if np.any(np.isfinite(j_max)) and not chosen.handles_jerk:
+            if s_curve:
                 plan = jerk_limited(request, chosen)  # jerk limits: the planner's time law averaged (an S-curve)
             else:
                 plan = chosen.plan(request)
