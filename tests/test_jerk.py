@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from jaxcnc.gcode import parse_gcode
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.path import build_spans
-from jaxcnc.gcode import parse_gcode
 from jaxcnc.io.curves import curves_program
 from jaxcnc.planners import plan_job, register_planner
-from jaxcnc.planners.job import _span_feed
+from jaxcnc.planners.job import span_feed
 from jaxcnc.planners.protocol import machine_limits
 from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops
 from tests.conftest import make_machine
@@ -99,7 +99,7 @@ def test_a_blend_passed_slower_than_a_stop_is_kept_exact():
     for j, exact_rows in ((1e5, [north]), (None, [])):
         m = make_machine(v=250, a=3000, j=j)
         spans = build_spans(program, m.path.corner_tol_mm)
-        exact = blends_slower_than_stops(spans, _span_feed(program, spans, m), *machine_limits(m), len(program))
+        exact = blends_slower_than_stops(spans, span_feed(program, spans, m), *machine_limits(m), len(program))
         assert list(np.flatnonzero(exact)) == exact_rows
 
 
@@ -126,6 +126,25 @@ def test_a_serpentine_plans_at_once_and_alike_at_any_tick_rate(tmp_path):
     assert abs(times[10000] / times[1000] - 1) <= 0.01
     for t in times.values():
         assert expected <= t <= expected * 1.01
+
+
+def test_a_long_cruise_at_the_speed_limit_is_planned_alike_at_any_tick_rate(tmp_path):
+    """Two 800 mm lines at the axis speed limit joined by a 1 µm step (a red-team program): 10 kHz read the
+    averaged cruise ~1e-9 above v_max (the rounding of s_W's integrals), slowed the window and the acceleration
+    step by step and planned 20.4 s against 11.6 s at 1 kHz (1000 mm lines; 8.2 s without j_max) until
+    2026-11-28; the S-curve stage plans its speeds with the margin now, and the corners stop."""
+    text = "G64 P0.01\nG1 X-400 F15000\nX400\nX400 Y0.001\nX-400 Y0.001\nM2\n"
+    times = {}
+    for hz in (1000, 10000):
+        m = make_machine(tick_hz=hz, v=250, a=3000, rapid=250, j=1e5)
+        job, _, meas = table_of(text, m, tmp_path, f"u{hz}.ticks")
+        assert meas.ok, meas.violations[:3]
+        times[hz] = job.plan.total_time_s
+    # a trapezoid and one window (A/J = 0.03 s) per rest-to-rest group: 400 mm out, 800 mm back, the step, 800 mm
+    expected = sum(d / 250 + 250 / 3000 + 0.03 for d in (400, 800, 800)) + 2 * np.sqrt(0.001 / 3000) + 0.03
+    assert abs(times[10000] / times[1000] - 1) <= 0.01
+    for t in times.values():
+        assert expected <= t <= expected + 0.01
 
 
 def test_casadi_reference_with_jerk_rows(tmp_path):

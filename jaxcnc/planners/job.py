@@ -104,7 +104,7 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
 TRIM_BLOCKS = 1 << 18
 
 
-def _span_feed(program: Program, spans: Spans, machine: MachineConfig) -> np.ndarray:
+def span_feed(program: Program, spans: Spans, machine: MachineConfig) -> np.ndarray:
     """``(n,)`` the programmed speed of each span: its row's feed (the machine's default where none is set), or
     the machine's rapid cap on a rapid."""
     rows = spans.block
@@ -140,13 +140,13 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     s_curve = np.any(np.isfinite(machine_limits(machine)[2])) and not chosen.handles_jerk
     if s_curve:  # under jerk limits, corners whose blend is passed slower than a stop are kept exact
         exact = blends_slower_than_stops(
-            spans, _span_feed(program, spans, machine), *machine_limits(machine), len(program)
+            spans, span_feed(program, spans, machine), *machine_limits(machine), len(program)
         )
         if exact.any():
             with planning_scope():
                 spans = build_spans(program, machine.path.corner_tol_mm, exact_before=exact)
     rows = spans.block
-    feed = _span_feed(program, spans, machine)
+    feed = span_feed(program, spans, machine)
     dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
     first_of_block = np.concatenate([[True], rows[1:] != rows[:-1]])
     stop = program.stop_before[rows] & first_of_block

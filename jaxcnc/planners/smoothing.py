@@ -428,7 +428,10 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, np.ndarray]:
         a = a_max * alpha
         holds = holds if planner.honours_holds else None
-        base = planner.plan(dataclasses.replace(request, a_max=with_margin(a), feed_mm_s=feed, hold_caps=holds))
+        # the speed keeps the margin too: s_W is a difference of two integrals ∫ s dt over a group, whose rounding
+        # (~ulp(length x duration) / W) reads a cruise at v_max up to ~1e-9 above it at 10 kHz, beyond the check's slack
+        limits = dict(v_max=with_margin(v_max), a_max=with_margin(a))
+        base = planner.plan(dataclasses.replace(request, **limits, feed_mm_s=feed, hold_caps=holds))
         if not isinstance(base, Plan):
             raise PlanningError(
                 f"planner {planner.name!r} returned a {type(base).__name__}; the S-curve stage (j_max is set) "
