@@ -13,6 +13,7 @@ from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.planners.job import span_feed
 from jaxcnc.planners.protocol import machine_limits
 from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops
+from jaxcnc.ticks.deviation import path_deviation
 from tests.conftest import make_machine
 from tests.helpers import random_cubic_nurbs, table_of
 from tests.test_curves import table_of_program
@@ -145,6 +146,26 @@ def test_a_long_cruise_at_the_speed_limit_is_planned_alike_at_any_tick_rate(tmp_
     assert abs(times[10000] / times[1000] - 1) <= 0.01
     for t in times.values():
         assert expected <= t <= expected + 0.01
+
+
+def test_tangent_arcs_are_joined_with_a_continuous_curvature_under_jerk_limits(tmp_path):
+    """A line into a tangent arc (the curvature steps by 1/r): at speed that is an acceleration step, a jerk of
+    ``v² f / r`` at tick rate ``f``, so the demo bracket with j_max 5e4 planned to 33.3 s at 1 kHz and 74.8 s at
+    10 kHz until 2026-11-28 (31.3 s without j_max). Under a jerk limit such junctions are blended (G2) too: the
+    same time at both rates, within the tolerance, every limit at every tick."""
+    text = "G64 P0.01\nG1 X30 F1500\nG3 X40 Y10 I0 J10\nG1 Y40\nG2 X60 Y40 I10 J0\nG1 Y0\nM2\n"
+    times = {}
+    for hz in (1000, 10000):
+        m = make_machine(tick_hz=hz, v=200, a=2000, j=5e4)
+        job, table, meas = table_of(text, m, tmp_path, f"t{hz}.ticks")
+        assert meas.ok, meas.violations[:3]
+        assert np.count_nonzero(job.spans.kind == SpanKind.BLEND) >= 4  # the four tangent junctions, at least
+        dev = path_deviation(table, m, job.program)  # the G2 joins leave the program by less than the tolerance
+        assert dev.n_over == 0 and 0 < dev.max_mm <= 0.01
+        times[hz] = job.plan.total_time_s
+    free = plan_job(parse_gcode(text, "t.ngc"), make_machine(v=200, a=2000)).plan.total_time_s
+    assert abs(times[10000] / times[1000] - 1) <= 0.01
+    assert times[1000] <= 1.1 * free
 
 
 def test_casadi_reference_with_jerk_rows(tmp_path):

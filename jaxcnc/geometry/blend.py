@@ -301,16 +301,49 @@ def _chain_curvature(spans: Spans, j: np.ndarray, ell_a: np.ndarray, ell_b: np.n
     return k_mid
 
 
-def blend_path(program: Program, spans: Spans, corner_tol_mm: float, exact_before: np.ndarray | None = None) -> Spans:
-    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring)."""
+def curvature_steps(spans: Spans, arrays: dict | None = None) -> np.ndarray:
+    """``(n-1,)`` bool: the junctions where an arc takes part and the curvature vector steps (by more than
+    ``1e-9`` of the larger one): tangent there or not, the path is G1 at most (an acceleration step at speed)."""
+    n = len(spans)
+    out = np.zeros(max(n - 1, 0), bool)
+    arc = spans.kind == SpanKind.ARC
+    j = np.flatnonzero(arc[:-1] | arc[1:])
+    if j.size == 0:
+        return out
+    arrays = span_arrays(spans) if arrays is None else arrays
+    ka = evaluate_path(arrays, j, spans.length[j], 2)[2]
+    kb = evaluate_path(arrays, j + 1, np.zeros(j.size), 2)[2]
+    big = np.maximum(np.linalg.norm(ka, axis=1), np.linalg.norm(kb, axis=1))
+    out[j] = np.linalg.norm(ka - kb, axis=1) > 1e-9 * big
+    return out
+
+
+def blend_path(
+    program: Program,
+    spans: Spans,
+    corner_tol_mm: float,
+    exact_before: np.ndarray | None = None,
+    g2: bool = False,
+) -> Spans:
+    """``spans`` with every junction that :func:`junction_tolerances` allows blended (module docstring).
+
+    ``g2``: tangent junctions whose curvature steps (:func:`curvature_steps`: a line into an arc, arcs of other
+    radii) are blended as well, so that the path is G2 wherever it may leave the program — what a jerk limit needs
+    (at speed ``v`` a curvature step ``ΔK`` is an acceleration step ``ΔK v²``: a jerk of ``ΔK v² f`` at tick rate
+    ``f``, which only a lower speed at a higher tick rate keeps within ``J``)."""
     tol = junction_tolerances(program, spans, corner_tol_mm, exact_before)
     t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
     turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
-    j = np.flatnonzero((tol > 0) & (turn > MIN_TURN_RAD) & (turn <= MAX_TURN_RAD))
+    joins = turn > MIN_TURN_RAD
+    if g2 and np.any((tol > 0) & ~joins):
+        joins |= (tol > 0) & curvature_steps(spans)
+    j = np.flatnonzero((tol > 0) & joins & (turn <= MAX_TURN_RAD))
     if j.size == 0:
         return spans
     half = 0.5 * spans.length
-    ell = np.minimum(8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2)), np.minimum(half[j], half[j + 1]))
+    with np.errstate(divide="ignore"):  # (a tangent junction: no reach from the turn; half of either span at most)
+        reach = 8.0 * tol[j] / (3.0 * np.sin(turn[j] / 2))
+    ell = np.minimum(reach, np.minimum(half[j], half[j + 1]))
     lines = (spans.kind[j] == SpanKind.LINE) & (spans.kind[j + 1] == SpanKind.LINE)
     # line–line: the deviation is (3/8) ℓ sin(θ/2) exactly; elsewhere measure and shrink
     check = np.flatnonzero(~lines)

@@ -14,11 +14,14 @@ from jaxcnc.geometry.spans import Spans, program_spans
 from jaxcnc.program import Program
 
 
-def build_spans(program: Program, corner_tol_mm: float = 0.0, exact_before: np.ndarray | None = None) -> Spans:
+def build_spans(
+    program: Program, corner_tol_mm: float = 0.0, exact_before: np.ndarray | None = None, g2: bool = False
+) -> Spans:
     """The spans of ``program`` in path order, junctions blended within the tolerance (0: exact corners).
 
-    ``exact_before``: ``(rows,)`` bool, junctions into these rows kept exact too (where a planner asks)."""
-    return blend_path(program, program_spans(program), corner_tol_mm, exact_before)
+    ``exact_before``: ``(rows,)`` bool, junctions into these rows kept exact too (where a planner asks). ``g2``:
+    tangent junctions where the curvature steps are blended too (for jerk limits; :func:`~.blend.blend_path`)."""
+    return blend_path(program, program_spans(program), corner_tol_mm, exact_before, g2)
 
 
 __all__ = ["build_spans"]

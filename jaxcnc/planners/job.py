@@ -132,19 +132,20 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     axis_source = _check_axes(program, machine)
     if len(program) >= TRIM_BLOCKS:
         release_free_heap()  # what earlier work freed (a job planned before): the spans' build starts lean
+    # under jerk limits (the S-curve stage) the path is G2 where it is blended: tangent junctions where the
+    # curvature steps are blended too, and corners whose blend is passed slower than a stop are kept exact
+    s_curve = bool(np.any(np.isfinite(machine_limits(machine)[2])) and not chosen.handles_jerk)
     with planning_scope():  # the blends' kernels too: the same spans on any machine, none compiled for a GPU
-        spans = build_spans(program, machine.path.corner_tol_mm)
+        spans = build_spans(program, machine.path.corner_tol_mm, g2=s_curve)
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)
-    s_curve = np.any(np.isfinite(machine_limits(machine)[2])) and not chosen.handles_jerk
-    if s_curve:  # under jerk limits, corners whose blend is passed slower than a stop are kept exact
-        exact = blends_slower_than_stops(
-            spans, span_feed(program, spans, machine), *machine_limits(machine), len(program)
-        )
+    if s_curve:
+        feed = span_feed(program, spans, machine)
+        exact = blends_slower_than_stops(spans, feed, *machine_limits(machine), len(program))
         if exact.any():
             with planning_scope():
-                spans = build_spans(program, machine.path.corner_tol_mm, exact_before=exact)
+                spans = build_spans(program, machine.path.corner_tol_mm, exact_before=exact, g2=True)
     rows = spans.block
     feed = span_feed(program, spans, machine)
     dwell = np.where(program.kind[rows] == Kind.DWELL, program.dwell_s[rows], 0.0)
