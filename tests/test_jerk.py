@@ -168,6 +168,20 @@ def test_tangent_arcs_are_joined_with_a_continuous_curvature_under_jerk_limits(t
     assert times[1000] <= 1.1 * free
 
 
+def test_a_curvature_step_on_the_exact_path_caps_its_junction_not_the_job(tmp_path):
+    """G61 (exact path) keeps a line–arc junction unblended: its curvature step is a jerk of ``ΔK v² f`` at the tick
+    rate, so the junction alone is passed slowly (``curvature_step_caps``: 5 mm/s at 10 kHz here) and the lines and
+    arcs keep the feed; the S-curve stage used to fall back on a global slow-down (17.25 s, the feed lowered to
+    ~13 mm/s, until 2026-11-28)."""
+    text = "G61\nG1 X30 F1500\nG3 X40 Y10 I0 J10\nG1 Y40\nG2 X60 Y40 I10 J0\nG1 Y0\nM2\n"
+    m = make_machine(tick_hz=10000, v=200, a=2000, j=5e4)
+    job, _, meas = table_of(text, m, tmp_path)
+    assert meas.ok, meas.violations[:3]
+    assert not np.any(job.spans.kind == SpanKind.BLEND)
+    assert max(meas.max_abs_v["x"], meas.max_abs_v["y"]) >= 25 * 0.999  # the feed, on the lines
+    assert job.plan.total_time_s < 12.0
+
+
 def test_casadi_reference_with_jerk_rows(tmp_path):
     """The NLP with jerk rows on a line: slower than without them, near the analytic S-curve optimum.
 

@@ -41,7 +41,7 @@ from jaxcnc.buckets import bucket_size, pad_rows
 from jaxcnc.geometry import poly
 from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
-from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
+from jaxcnc.geometry.evaluate import evaluate_path, junction_curvatures, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
 from jaxcnc.program import LaserMode, Program
@@ -310,9 +310,7 @@ def curvature_steps(spans: Spans, arrays: dict | None = None) -> np.ndarray:
     j = np.flatnonzero(arc[:-1] | arc[1:])
     if j.size == 0:
         return out
-    arrays = span_arrays(spans) if arrays is None else arrays
-    ka = evaluate_path(arrays, j, spans.length[j], 2)[2]
-    kb = evaluate_path(arrays, j + 1, np.zeros(j.size), 2)[2]
+    ka, kb = junction_curvatures(spans, j, arrays)
     big = np.maximum(np.linalg.norm(ka, axis=1), np.linalg.norm(kb, axis=1))
     out[j] = np.linalg.norm(ka - kb, axis=1) > 1e-9 * big
     return out

@@ -114,6 +114,15 @@ def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int 
     return {k: jax.device_put(v) for k, v in arrays.items()}
 
 
+def junction_curvatures(spans, j: np.ndarray, arrays: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Curvature vectors ``(k, 3)`` at the end of spans ``j`` ``(k,)`` and at the start of the spans after them
+    (NumPy; ``arrays``: :func:`span_arrays` of ``spans`` where made already)."""
+    arrays = span_arrays(spans) if arrays is None else arrays
+    k_end = evaluate_path(arrays, j, spans.length[j], 2)[2]
+    k_start = evaluate_path(arrays, j + 1, np.zeros(j.size), 2)[2]
+    return k_end, k_start
+
+
 def _poly_columns(c: np.ndarray) -> np.ndarray:
     """Poly coefficients in column layout ``(p+1, 4, q)`` from ``(p+1, 4, q)`` or polynomial ``(p+1, 3, q)`` ones
     (the weight 1 added: what the evaluation reads), contiguous."""

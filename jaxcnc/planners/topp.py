@@ -34,7 +34,7 @@ import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.blend_kernel import cpu_loop_options
-from jaxcnc.geometry.evaluate import span_arrays
+from jaxcnc.geometry.evaluate import junction_curvatures, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
 from jaxcnc.jitcache import cached_jit
@@ -552,6 +552,26 @@ def plan_topp(req: PlanRequest) -> Plan:
     return segments.plan(req.machine.tick_hz)
 
 
+def curvature_step_caps(spans: Spans, j_max: np.ndarray, tick_hz: float) -> np.ndarray:
+    """``(n-1,)`` cap on ``x = v²`` at each junction where the curvature vector steps (by ``ΔK``, per axis): passed at
+    ``v`` the axis's acceleration steps by ``ΔK_i v²`` within one tick, a jerk of ``ΔK_i v² f`` at tick rate ``f``,
+    kept within ``JERK_SHARE`` of ``J_i``. Such steps remain where a junction may not be blended (G61, a beam that
+    changes, no tolerance); blended junctions are G2 under jerk limits (:func:`~jaxcnc.geometry.blend.blend_path`).
+    Inherently tied to the tick rate: the jerk of a step is measured one tick wide."""
+    n = len(spans)
+    caps = np.full(max(n - 1, 0), np.inf)
+    curved = is_curved(spans.kind)
+    j = np.flatnonzero(curved[:-1] | curved[1:])
+    if j.size == 0:
+        return caps
+    k_end, k_start = junction_curvatures(spans, j)
+    step = np.abs(k_end - k_start)  # (k, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where((step > 0) & np.isfinite(j_max), JERK_SHARE * j_max / (step * tick_hz), np.inf)
+    caps[j] = np.min(x, axis=1)
+    return caps
+
+
 #: Intervals planned at once; a longer program is planned window by window (the same plan).
 WINDOW_INTERVALS = 1 << 17
 #: Build the grid of the spans after a window in a worker thread while the window is solved (:class:`_GridAhead`;
@@ -587,6 +607,8 @@ class _ProgramFacts:
             req.machine.tick_hz,
         )
         x_junction = np.asarray(x_junction)[: n - 1]
+        if req.j_max is not None and np.any(np.isfinite(req.j_max)):
+            x_junction = np.minimum(x_junction, curvature_step_caps(spans, np.asarray(req.j_max), req.machine.tick_hz))
         zero = np.zeros(1)
         moves = spans.moving_axes & np.isfinite(req.a_max)
         return _ProgramFacts(
