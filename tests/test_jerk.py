@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,6 +12,7 @@ from jaxcnc.gcode import parse_gcode
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.io.curves import curves_program
+from jaxcnc.machine import MachineConfig, parse_machine
 from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.planners.job import span_feed
 from jaxcnc.planners.protocol import machine_limits
@@ -180,6 +184,27 @@ def test_a_curvature_step_on_the_exact_path_caps_its_junction_not_the_job(tmp_pa
     assert not np.any(job.spans.kind == SpanKind.BLEND)
     assert max(meas.max_abs_v["x"], meas.max_abs_v["y"]) >= 25 * 0.999  # the feed, on the lines
     assert job.plan.total_time_s < 12.0
+
+
+def _cutter(tick_hz: int, j: float | None) -> MachineConfig:
+    """The bundled laser cutter (examples/machines) at ``tick_hz``, with ``j_max = j`` on every axis."""
+    text = (Path(__file__).parents[1] / "examples" / "machines" / "laser-cutter.toml").read_text()
+    text = re.sub(r"(?m)^tick_hz = .*$", f"tick_hz = {tick_hz}", text)
+    if j is not None:
+        text = re.sub(r"(?m)^(a_max = .*)$", rf"\1\nj_max = {j:g}", text)
+    return parse_machine(text, "laser-cutter.toml")
+
+
+def test_a_large_circle_at_the_speed_limit_keeps_its_time_at_10_khz(tmp_path):
+    """A 400 mm radius circle at 250 mm/s (F15000) on the bundled laser cutter with j_max 1e5 at 10 kHz: 12.58 s
+    since 2026-11-28 (without j_max: within 1 %). The rapid's 90° corner into the circle was blended within 0.01 mm
+    (a blend passed at a few mm/s, which the S-curve stage could not settle) and the stage ended in its global
+    slow-down: 424.8 s. That corner is kept exact now (blends_slower_than_stops)."""
+    text = "G0 X300 Y500\nG1 F15000\nG2 X300 Y500 I400 J0\nM2\n"
+    job, _, meas = table_of(text, _cutter(10000, 1e5), tmp_path)
+    assert meas.ok, meas.violations[:3]
+    free = plan_job(parse_gcode(text, "c.ngc"), _cutter(10000, None)).plan
+    assert job.plan.total_time_s <= 1.02 * free.total_time_s
 
 
 def test_casadi_reference_with_jerk_rows(tmp_path):
