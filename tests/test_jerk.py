@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxcnc.gcode import parse_gcode
+from jaxcnc.gcode import load_gcode, parse_gcode
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.io.curves import curves_program
@@ -16,7 +16,7 @@ from jaxcnc.machine import MachineConfig, parse_machine
 from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.planners.job import span_feed
 from jaxcnc.planners.protocol import machine_limits
-from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops
+from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops, passed_speed
 from jaxcnc.ticks.deviation import path_deviation
 from tests.conftest import make_machine
 from tests.helpers import random_cubic_nurbs, table_of
@@ -205,6 +205,32 @@ def test_a_large_circle_at_the_speed_limit_keeps_its_time_at_10_khz(tmp_path):
     assert meas.ok, meas.violations[:3]
     free = plan_job(parse_gcode(text, "c.ngc"), _cutter(10000, None)).plan
     assert job.plan.total_time_s <= 1.02 * free.total_time_s
+
+
+def test_a_span_between_two_ticks_is_capped_at_the_speed_it_was_passed_at():
+    """A span shorter than a tick's step holds no tick: span_peaks measures 0 there; the stage's cap reads the
+    measured speeds around it instead (it capped such a blend piece at 1e-3 mm/s before)."""
+    speed = np.array([0.0, 5.0, 0.0, 0.0, 8.0, 3.0, 0.0])
+    assert list(passed_speed(speed)) == [5.0, 5.0, 8.0, 8.0, 8.0, 3.0, 3.0]
+    assert list(passed_speed(np.zeros(3))) == [0.0, 0.0, 0.0]
+
+
+PEERS = Path(__file__).resolve().parents[1] / ".." / "shared" / "peers"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not PEERS.is_dir(), reason="../shared/peers absent")
+def test_a_cam_program_under_a_jerk_limit_is_not_slowed_down_as_a_whole(tmp_path):
+    """meander520 (the peers' CAM program: lines, small arcs, tiny blends) on the peers' machine with j_max 1e6 at
+    1 kHz: 51.2 s against 34.0 s without the jerk limit; 271.2 s before 2026-11-28 (blend pieces shorter than a
+    tick's step were capped at 1e-3 mm/s, then the global slow-down)."""
+    text = (PEERS / "machines" / "m1000_t0.01.toml").read_text()
+    free_m = parse_machine(text, "m1000_t0.01.toml")
+    m = parse_machine(re.sub(r"(?m)^(a_max = .*)$", r"\1\nj_max = 1.0e6", text), "m1000_t0.01_j.toml")
+    program = load_gcode(PEERS / "programs" / "meander520.ngc")
+    free = plan_job(program, free_m).plan.total_time_s
+    job = plan_job(program, m)
+    assert job.plan.total_time_s <= 1.6 * free
 
 
 def test_casadi_reference_with_jerk_rows(tmp_path):

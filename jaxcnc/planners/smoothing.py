@@ -317,6 +317,25 @@ def span_peaks(
     return worst, speed
 
 
+def passed_speed(speed: np.ndarray) -> np.ndarray:
+    """``(n,)`` the speeds :func:`span_peaks` measured, where a span holds no tick (shorter than a tick's step:
+    measured 0) the larger of the nearest measured ones before and after it — the speed it was passed at lies
+    between them. Capping such a span at its measured 0 (the floor, 1e-3 mm/s) made a 12 µm blend piece take
+    12 s: meander520 with j_max 1e6 planned to 271 s against 34 s without the jerk limit."""
+    n = speed.size
+    measured = speed > 0
+    if measured.all() or not measured.any():
+        return speed
+    idx = np.arange(n)
+    before = np.maximum.accumulate(np.where(measured, idx, -1))
+    after = np.minimum.accumulate(np.where(measured, idx, n)[::-1])[::-1]
+    near = np.maximum(
+        np.where(before >= 0, speed[np.maximum(before, 0)], 0.0),
+        np.where(after < n, speed[np.minimum(after, n - 1)], 0.0),
+    )
+    return np.where(measured, speed, near)
+
+
 def minima_holds(plan: Plan, s_seg: np.ndarray, window_s: float, widen: float) -> np.ndarray:
     """``(k, 3)`` hold rows ``(s_lo, s_hi, v)`` that flatten ``plan``'s moving speed minima.
 
@@ -501,6 +520,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
         if curved.size:
             # on curves the curvature's change adds 3 K ṡ s̈ + K' ṡ³ (it grows like v³): slow those spans
             # and their curved neighbours to the speed measured there times a cube-root share of the excess
+            speed = passed_speed(speed)
             excess_near = np.maximum.reduce([worst[1][np.clip(curved + d, 0, len(spans) - 1)] for d in (-1, 0, 1)])
             factor = np.clip((margin / excess_near) ** (1.0 / 3.0), 0.5, 0.97)
             cap = np.full(len(spans), np.inf)
