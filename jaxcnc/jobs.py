@@ -598,6 +598,7 @@ def plan_program_file(
             "n_spans": len(job.spans),
             "n_ticks": job.plan.n_ticks + 1,
             "path_length_mm": job.path_length_mm,
+            "exact_corners": job.exact_corners,
         },
     )  # fmt: skip
     job, program, table, (meas, path) = run.planned, run.program, run.table, run.checked
@@ -612,6 +613,7 @@ def plan_program_file(
         "n_ticks": job["n_ticks"],
         "tick_hz": machine.tick_hz,
         "path_length_mm": job["path_length_mm"],
+        "corners_kept_exact": job["exact_corners"],
         "plan_wall_s": run.plan_wall_s,
         "timings_s": run.seconds,
         **measured(meas),

@@ -12,13 +12,14 @@ from jaxcnc.gcode import load_gcode, parse_gcode
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.io.curves import curves_program
-from jaxcnc.machine import MachineConfig, parse_machine
+from jaxcnc.jobs import plan_file
+from jaxcnc.machine import MachineConfig, load_machine, parse_machine
 from jaxcnc.planners import plan_job, register_planner
 from jaxcnc.planners.job import span_feed
 from jaxcnc.planners.protocol import machine_limits
 from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops, passed_speed
 from jaxcnc.ticks.deviation import path_deviation
-from tests.conftest import make_machine
+from tests.conftest import machine_text, make_machine
 from tests.helpers import random_cubic_nurbs, table_of
 from tests.test_curves import table_of_program
 
@@ -122,8 +123,13 @@ def test_a_serpentine_plans_at_once_and_alike_at_any_tick_rate(tmp_path):
         m = make_machine(tick_hz=hz, v=250, a=3000, rapid=250, j=1e5)
         job, _, meas = table_of(text, m, tmp_path, f"s{hz}.ticks")
         assert meas.ok, meas.violations[:3]
-        assert not np.any(job.spans.kind == SpanKind.BLEND)
+        assert not np.any(job.spans.kind == SpanKind.BLEND) and job.exact_corners == 7
         times[hz] = job.plan.total_time_s
+    # what jaxcnc plan reports (and prints)
+    (tmp_path / "serp.ngc").write_text(text)
+    (tmp_path / "m.toml").write_text(machine_text(tick_hz=1000, v=250, a=3000, rapid=250, j=1e5))
+    report = plan_file(tmp_path / "serp.ngc", load_machine(tmp_path / "m.toml"), tmp_path / "cli.ticks", progress=False)
+    assert report["corners_kept_exact"] == 7 and not report["violations"]
     # each move its own rest-to-rest group: a trapezoid and one window (A/J = 0.03 s) each
     lines_s = 100 / 250 + 250 / 3000 + 0.03
     steps_s = 2 * np.sqrt(0.1 / 3000) + 0.03

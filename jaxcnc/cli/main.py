@@ -228,6 +228,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
             f"{report['max_path_deviation_mm'] * 1e3:.3g} µm from the programmed path "
             f"(tolerance {report['path_tolerance_mm'] * 1e3:.3g} µm)"
         )
+        if report.get("corners_kept_exact"):
+            print(
+                f"  {report['corners_kept_exact']} corners kept exact under the jerk limits: blended, they would be "
+                "passed slower than a stop (docs/planning.md, 'Blending')"
+            )
     if not args.quiet and "dynamics" in report:
         d = report["dynamics"]
         print(

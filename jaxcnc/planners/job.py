@@ -45,6 +45,9 @@ class PlannedJob:
     axis_source: tuple[int, ...]
     plan_wall_s: float
     planner: str = DEFAULT_PLANNER
+    #: corners the program would blend that are kept exact under the machine's jerk limits (a blend there would be
+    #: passed slower than a stop: :func:`~jaxcnc.planners.smoothing.blends_slower_than_stops`)
+    exact_corners: int = 0
 
     @property
     def path_length_mm(self) -> float:
@@ -140,6 +143,7 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)
+    exact = np.zeros(0, bool)
     if s_curve:
         feed = span_feed(program, spans, machine)
         exact = blends_slower_than_stops(spans, feed, *machine_limits(machine), len(program))
@@ -182,4 +186,5 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
         axis_source=axis_source,
         plan_wall_s=time.perf_counter() - t0,
         planner=name,
+        exact_corners=int(np.count_nonzero(exact)),
     )
