@@ -137,7 +137,8 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
         release_free_heap()  # what earlier work freed (a job planned before): the spans' build starts lean
     # under jerk limits (the S-curve stage) the path is G2 where it is blended: tangent junctions where the
     # curvature steps are blended too, and corners whose blend is passed slower than a stop are kept exact
-    s_curve = bool(np.any(np.isfinite(machine_limits(machine)[2])) and not chosen.handles_jerk)
+    limits = machine_limits(machine)
+    s_curve = bool(np.any(np.isfinite(limits[2])) and not chosen.handles_jerk)
     with planning_scope():  # the blends' kernels too: the same spans on any machine, none compiled for a GPU
         spans = build_spans(program, machine.path.corner_tol_mm, g2=s_curve)
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
@@ -146,7 +147,7 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     exact = np.zeros(0, bool)
     if s_curve:
         feed = span_feed(program, spans, machine)
-        exact = blends_slower_than_stops(spans, feed, *machine_limits(machine), len(program))
+        exact = blends_slower_than_stops(spans, feed, *limits, len(program))
         if exact.any():
             with planning_scope():
                 spans = build_spans(program, machine.path.corner_tol_mm, exact_before=exact, g2=True)

@@ -416,12 +416,6 @@ def blends_slower_than_stops(
     return out
 
 
-#: Relative rounding of a speed measured by finite differences of exact positions (a few ulps of a coordinate over
-#: one tick's step: ~1e-11 at 1500 mm and 25 µm a tick) that the S-curve stage accepts above ``v_max``; the
-#: table verifier (:data:`jaxcnc.ticks.verify.REL_SLACK`) allows 1e-9.
-SPEED_ROUNDING = 5e-10
-
-
 def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -> SmoothPlan:
     """Plan ``request`` with ``planner`` so that the machine's ``j_max`` also holds at every tick.
 
@@ -463,9 +457,8 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             ratio = np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
         window = max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
         sp = smooth(base, window, span_s0, alpha)
-        # a and j are compared with the margin; speeds with the limit itself, but for the rounding of the finite
-        # differences: a plan that cruises at v_max measures a few ulps above it, and was slowed down to 0.8 v_max
-        worst, speed = span_peaks(sp, spans, v_max * (1.0 + SPEED_ROUNDING) / margin, a_max, j_max)
+        # a and j are compared with the margin, speeds with the limit itself (the plan keeps the margin below it)
+        worst, speed = span_peaks(sp, spans, v_max / margin, a_max, j_max)
         return sp, worst, speed
 
     alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf
