@@ -10,12 +10,12 @@ from jaxcnc.format import TableFile
 from jaxcnc.gcode import parse_gcode
 from jaxcnc.machine import MachineConfig
 from jaxcnc.planners import PlannedJob, plan_job, program_start
-from jaxcnc.planners.registry import DEFAULT_PLANNER
+from jaxcnc.planners.registry import DEFAULT_PLANNER, Planner
 from jaxcnc.ticks.table import write_table
 from jaxcnc.ticks.verify import Measurement, measure_table
 
 
-def plan_text(text: str, machine: MachineConfig, planner: str = DEFAULT_PLANNER) -> PlannedJob:
+def plan_text(text: str, machine: MachineConfig, planner: str | Planner = DEFAULT_PLANNER) -> PlannedJob:
     start = program_start(machine)
     return plan_job(parse_gcode(text, "test.ngc", start=start, home=start), machine, planner)
 

@@ -91,6 +91,15 @@ def _fmt_axes(d: dict[str, float], unit: str) -> str:
     return ", ".join(f"{a}={v:.4g}" for a, v in d.items()) + f" {unit}"
 
 
+def _jerk_text(max_abs_j: dict[str, float], machine: str) -> str:
+    """``"; max |j| x=..., y=... mm/s³"`` for the axes of ``machine`` that have ``j_max`` (``""`` where none has)."""
+    from jaxcnc.machine import load_machine
+
+    m = load_machine(machine)
+    limited = {a: v for a, v in max_abs_j.items() if a in m.axis_names and m.axis(a).j_max is not None}
+    return f"; max |j| {_fmt_axes(limited, 'mm/s³')}" if limited else ""
+
+
 def _drawing_options(args: argparse.Namespace) -> dict:
     """The drawing options given on the command line (the front end refuses them for inputs that are not
     drawings, naming each)."""
@@ -224,8 +233,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         )
         print(
             f"  measured on the table: max |v| {_fmt_axes(report['max_abs_v'], 'mm/s')}; "
-            f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}; at most "
-            f"{report['max_path_deviation_mm'] * 1e3:.3g} µm from the programmed path "
+            f"max |a| {_fmt_axes(report['max_abs_a'], 'mm/s²')}{_jerk_text(report['max_abs_j'], args.machine)}; at "
+            f"most {report['max_path_deviation_mm'] * 1e3:.3g} µm from the programmed path "
             f"(tolerance {report['path_tolerance_mm'] * 1e3:.3g} µm)"
         )
         if report.get("corners_kept_exact"):
@@ -323,7 +332,10 @@ def cmd_check(args: argparse.Namespace) -> int:
             f"OK {args.table}: {h.n_rows} ticks ({(h.n_rows - 1) / h.tick_hz:.3f} s at {h.tick_hz:g} Hz), "
             f"checksums, {checked}"
         )
-        print(f"  max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}")
+        print(
+            f"  max |v| {_fmt_axes(meas.max_abs_v, 'mm/s')}; max |a| {_fmt_axes(meas.max_abs_a, 'mm/s²')}"
+            f"{_jerk_text(meas.max_abs_j, args.machine)}"
+        )
         if meas.pulses is not None:
             pc = meas.pulses
             print(
