@@ -324,3 +324,43 @@ def test_plan_and_check_print_the_jerk_of_axes_that_have_a_limit(tmp_path, capsy
         assert main(["check", str(table), "--machine", str(machine)]) == 0
         out = capsys.readouterr().out
         assert (out.count("max |j| x=") == 2) == shown and ("max |j|" in out) == shown, out
+
+
+def test_a_step_of_nanometres_between_two_corners_is_planned_alike_at_any_tick_rate(tmp_path):
+    """A 42 nm step between an arc and a line (a red-team program): its blends are 17-42 nm long and turn their
+    curvature up to ~1e4 /mm, so they are kept exact; the second one came only once the first was (its line was no
+    longer shared), and the rule is asked again of the new blends now. Until 2026-11-28 that blend stayed: 0.638 s at
+    1 kHz and 2.884 s at 10 kHz (68 s of planning), through the stage's global slow-down."""
+    text = "G64 P0.01\nG1 X10 F6000\nG3 X20 Y0 I5 J0\nG1 X20.00003 Y0.00003\nX30 Y5\nM2\n"
+    times = {}
+    for hz in (1000, 10000):
+        job, _, meas = table_of(
+            text, make_machine(tick_hz=hz, v=250, a=3000, rapid=250, j=1e5), tmp_path, f"n{hz}.ticks"
+        )
+        assert meas.ok, meas.violations[:3]
+        assert job.exact_corners == 3 and not np.any(job.spans.kind == SpanKind.BLEND)
+        times[hz] = job.plan.total_time_s
+    assert abs(times[10000] / times[1000] - 1) <= 0.01, times
+
+
+def test_a_long_curve_whose_excess_is_at_its_end_is_held_there_alone():
+    """_end_excess: a 31 mm arc with its worst jerk 0.01 mm from its end gets a hold there and leaves the feed caps;
+    a short curve (0.31 mm, under four windows' path: 0.4 mm at 5 mm/s), or one whose worst jerk lies in its middle,
+    stays with them."""
+    from jaxcnc.planners.smoothing import _end_excess
+
+    spans = build_spans(parse_gcode("G1 X10 F600\nG3 X30 Y0 I10 J0\nG3 X30.2 Y0 I0.1 J0\nM2\n", "e.ngc"), 0.0)
+    s0 = spans.s0
+    assert spans.length[1] > 20 and spans.length[2] < 1
+    curved = np.array([1, 2])
+    excess = np.array([0.0, 3.0, 3.0, 0.0])
+    where = np.zeros((2, len(spans)))
+    where[:, 1] = s0[1] + spans.length[1] - 0.01, 5.0  # 5 mm/s, 0.01 mm before the arc's end
+    where[:, 2] = s0[2] + 0.01, 5.0
+    rows, left = _end_excess(curved, spans, s0, excess, where, 0.02, 1.0)
+    assert left.tolist() == [2] and rows.shape == (1, 3)
+    v = 5.0 * 3.0 ** (-1 / 3)
+    np.testing.assert_allclose(rows[0], [where[0, 1] - v * 0.02, where[0, 1] + v * 0.02, v])
+    where[0, 1] = s0[1] + 10.0  # the middle of the arc: the feed caps
+    rows, left = _end_excess(curved, spans, s0, excess, where, 0.02, 1.0)
+    assert left.tolist() == [1, 2] and rows.shape == (0, 3)

@@ -105,6 +105,8 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
 #: (:func:`~jaxcnc.memory.release_free_heap`): a 1 M-block blended plan made after another one peaked
 #: ~120 MB higher, in the blends' build, on the pieces the first plan left (docs/planning.md, "Memory").
 TRIM_BLOCKS = 1 << 18
+#: Rounds of keeping corners exact under jerk limits (:func:`~.smoothing.blends_slower_than_stops`) at most.
+EXACT_ROUNDS = 4
 
 
 def span_feed(program: Program, spans: Spans, machine: MachineConfig) -> np.ndarray:
@@ -146,9 +148,14 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     _check_travel(program, spans, machine)
     exact = np.zeros(0, bool)
     if s_curve:
-        feed = span_feed(program, spans, machine)
-        exact = blends_slower_than_stops(spans, feed, *limits, len(program))
-        if exact.any():
+        exact = np.zeros(len(program), bool)
+        # a corner kept exact changes its neighbours' blends (one on a short line may take all of it now, or half
+        # where it took less): the rule is asked again of the new blends until it keeps no other corner exact
+        for _ in range(EXACT_ROUNDS):
+            more = blends_slower_than_stops(spans, span_feed(program, spans, machine), *limits, len(program))
+            if not np.any(more & ~exact):
+                break
+            exact |= more
             with planning_scope():
                 spans = build_spans(program, machine.path.corner_tol_mm, exact_before=exact, g2=True)
     rows = spans.block
