@@ -420,8 +420,9 @@ def blends_slower_than_stops(
     variation; a neighbour that is a blend too, where two meet on a line they consume, counts with its peak, which
     leans towards blending). Until 2026-11-28 the larger neighbour's curvature stood for both ends,
     ``2 (K - max(K_a, K_b)) / L``: a 17 nm blend beside another one (a 40 nm line between them, consumed) read no
-    ``K'`` at all and was kept, and a random program of tiny arcs planned to 570.7 s at 10 kHz (16.1 s now; 18.2 s
-    at 1 kHz, 17.9 s before). At speed ``v`` an axis sees ``K' v³`` of jerk, so the S-curve stage passes it at
+    ``K'`` at all and was kept: a red-team program of tiny arcs (``benchmarks/programs/jerk_redteam/fz_1.ngc``)
+    planned to 570.7 s at 10 kHz that way, 16.1 s with the total variation. At speed ``v`` an axis sees ``K' v³`` of
+    jerk, so the S-curve stage passes it at
     ``v_p ≤ min((s J / K')^(1/3), √(A / K), V)`` (``s`` = topp's ``JERK_SHARE``, ``V`` the feed, ``A`` and ``J``
     the axes' limits), at a constant speed from ``v_p W / 2`` before it to as far
     after it (:func:`minima_holds`; ``W = A / J``, the window). Against a stop at the corner (one more
@@ -491,9 +492,10 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     flat (:func:`minima_holds`) and the program planned again. Where the averaged table still breaks a
     limit, jerk excess first widens the window (up to 2×) while that helps; then, on curves and at
     their junctions (the ``3 K ṡ s̈ + K' ṡ³`` terms), those spans and their curved neighbours get a lower
-    feed cap from the speed measured there and the excess; acceleration excess scales the acceleration
-    down. If that stalls, a global slow-down ends the search with a valid plan, or a
-    :class:`~jaxcnc.errors.PlanningError`.
+    feed cap from the speed measured there and the excess (a long curve whose worst jerk lies at one of its ends is
+    held there instead, :func:`_end_excess`); acceleration excess scales the acceleration down. If that stalls, the
+    places that still break a limit are slowed down alone (``SQUEEZE_ROUNDS``), then a global slow-down ends the
+    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`.
     """
     margin = 1.0 - 1e-6  # the table is sampled from these very positions; the verifier allows its rounding
     f = request.machine.tick_hz
