@@ -146,9 +146,8 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     if len(spans) == 0 or not np.any(spans.kind != SpanKind.POINT):
         raise PlanningError(f"{program.file}: the program has no motion")
     _check_travel(program, spans, machine)
-    exact = np.zeros(0, bool)
+    exact = np.zeros(len(program), bool)
     if s_curve:
-        exact = np.zeros(len(program), bool)
         # a corner kept exact changes its neighbours' blends (one on a short line may take all of it now, or half
         # where it took less): the rule is asked again of the new blends until it keeps no other corner exact
         for _ in range(EXACT_ROUNDS):

@@ -359,8 +359,17 @@ def minima_holds(plan: Plan, s_seg: np.ndarray, window_s: float, widen: float) -
     v = np.concatenate([plan.v0, plan.v1[-1:]])
     s = np.concatenate([s_seg, s_seg[-1:] + plan.length[-1:]])
     lower = np.concatenate([[False], (v[1:-1] <= v[:-2]) & (v[1:-1] <= v[2:]), [False]]) & (v > 0)
-    r = widen * v[lower] * window_s / 2.0
-    return np.stack([s[lower] - r, s[lower] + r, v[lower]], axis=1)
+    return _holds_around(s[lower], v[lower], widen * v[lower] * window_s / 2.0)
+
+
+def _holds_around(s: np.ndarray, v: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """``(k, 3)`` hold rows ``(s - reach, s + reach, v)``: the speed at most ``v`` within ``reach`` mm of ``s``."""
+    return np.stack([s - reach, s + reach, v], axis=1)
+
+
+def _with_neighbours(mask: np.ndarray) -> np.ndarray:
+    """``(n,)`` bool: ``mask`` and the entries just before and after each of its ``True`` entries."""
+    return mask | np.concatenate([[False], mask[:-1]]) | np.concatenate([mask[1:], [False]])
 
 
 def _widen_where_bad(rows: np.ndarray, span_s0: np.ndarray, bad: np.ndarray, window_s: float) -> np.ndarray:
@@ -374,13 +383,12 @@ def _widen_where_bad(rows: np.ndarray, span_s0: np.ndarray, bad: np.ndarray, win
     gentle minima cost time for nothing (the butterfly at ``J`` = 1e5: 5.72 s against 5.32 s)."""
     if rows.size == 0 or not bad.any():
         return rows
-    near = bad | np.concatenate([[False], bad[:-1]]) | np.concatenate([bad[1:], [False]])
     centre = 0.5 * (rows[:, 0] + rows[:, 1])
     span = np.clip(np.searchsorted(span_s0, centre, side="right") - 1, 0, span_s0.size - 1)
     half = np.maximum(0.5 * rows[:, 2] * window_s, 0.5 * (rows[:, 1] - rows[:, 0]))
-    wide = near[span]
+    wide = _with_neighbours(bad)[span]
     out = rows.copy()
-    out[wide, 0], out[wide, 1] = centre[wide] - half[wide], centre[wide] + half[wide]
+    out[wide] = _holds_around(centre[wide], rows[wide, 2], half[wide])
     return out
 
 
@@ -405,8 +413,7 @@ def _end_excess(
     end = (excess[curved] > margin) & (np.minimum(into, length - into) <= reach) & (length > 4.0 * reach)
     factor = np.clip((margin / np.maximum(excess[curved[end]], margin)) ** (1.0 / 3.0), 0.5, 0.97)
     v = np.maximum(v_w[end], 1e-3) * factor
-    rows = np.stack([s_w[end] - v * window_s, s_w[end] + v * window_s, v], axis=1)
-    return rows, curved[~end]
+    return _holds_around(s_w[end], v, v * window_s), curved[~end]
 
 
 def blends_slower_than_stops(
@@ -557,7 +564,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             alpha *= float(np.clip(margin / excess_a, 0.7, 0.995))
         bad = worst[1] > margin
         is_curve = (spans.kind != SpanKind.LINE) & (spans.kind != SpanKind.POINT)
-        near_curve = is_curve | np.concatenate([[False], is_curve[:-1]]) | np.concatenate([is_curve[1:], [False]])
+        near_curve = _with_neighbours(is_curve)
         on_line = bad & ~near_curve
         if widening and bad.any() and stretch < 2.0 and excess_j < 0.98 * previous_j:
             # T s⃛ doubles where s̈ swings from +A to -A within the window: widen it while that helps
@@ -603,8 +610,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             feed[near] = np.minimum(feed[near], np.maximum(passed_speed(speed)[near], 1e-3) * SQUEEZE)
             jerky = bad[(worst[1][bad] > margin) & (where[1][bad] > 0)]
             v = where[1][jerky] * SQUEEZE
-            reach = v * sp.window_ticks / f
-            holds = np.concatenate([holds, np.stack([where[0][jerky] - reach, where[0][jerky] + reach, v], axis=1)])
+            holds = np.concatenate([holds, _holds_around(where[0][jerky], v, v * sp.window_ticks / f)])
             if worst[0].max() > margin:
                 alpha *= float(np.clip(margin / worst[0].max(), 0.7, 0.995))
             sp, worst, speed, where = attempt(feed, alpha, holds, stretch)

@@ -1244,9 +1244,9 @@ def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
     which, span = _ranges(first, last - first + 1)
     width = np.full(len(spans), np.inf)
     np.minimum.at(width, span, np.maximum(rows[which, 1] - rows[which, 0], 1e-9))
-    line = (spans.kind != SpanKind.POINT) & np.isfinite(width)
-    cuts = np.ceil(spans.length / (0.5 * np.where(line, width, 1.0))).astype(np.int64)
-    return np.where(line, np.maximum(counts, np.minimum(cuts, MAX_HOLD_CUTS)), counts)
+    held = (spans.kind != SpanKind.POINT) & np.isfinite(width)
+    cuts = np.ceil(spans.length / (0.5 * np.where(held, width, 1.0))).astype(np.int64)
+    return np.where(held, np.maximum(counts, np.minimum(cuts, MAX_HOLD_CUTS)), counts)
 
 
 def node_holds(req: PlanRequest, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
