@@ -20,11 +20,17 @@ A stored program is used only where everything that made it is the same (the key
 Programs from other source versions are removed when a new version writes its first (the newest
 ``KEEP_VERSIONS`` kept). Set ``JAXCNC_EXPORT_CACHE=0`` to trace as ``jax.jit`` does. Anything ``jax.export``
 cannot store (or a damaged file) falls back to ``jax.jit``, with the same results.
+
+A process that lives long (a planning service, a worker of a build, a user's loop over parts) keeps every program
+it compiled: :func:`release_when_crowded` hands them back before they reach the kernel's limit on memory mappings
+(each XLA:CPU executable maps memory of its own, and past ``vm.max_map_count`` LLVM crashes compiling the next one).
+:func:`~jaxcnc.planners.job.plan_job` and every job of :mod:`jaxcnc.jobs` call it first.
 """
 
 from __future__ import annotations
 
 import functools
+import gc
 import hashlib
 import inspect
 import os
@@ -33,6 +39,7 @@ import sys
 import tempfile
 import threading
 import types
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -45,6 +52,50 @@ KEEP_VERSIONS = 3
 #: Where stored programs go when set (a test's temporary directory); ``None``: beside the compile cache.
 DIRECTORY: Path | None = None
 _LOCK = threading.RLock()
+#: Share of the kernel's limit on a process's memory mappings (``vm.max_map_count``) above which
+#: :func:`release_when_crowded` releases the compiled programs.
+CROWDED_SHARE = 0.5
+#: ``vm.max_map_count`` where ``/proc`` does not say (Linux's default).
+DEFAULT_MAX_MAP_COUNT = 65530
+_INSTANCES: weakref.WeakSet = weakref.WeakSet()  # every _CachedJit made, for release_when_crowded
+
+
+def memory_maps() -> int:
+    """The memory mappings of this process (``/proc/self/maps`` lines; 0 where there is no procfs)."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return 0
+
+
+def max_map_count() -> int:
+    """The kernel's limit on a process's memory mappings (``vm.max_map_count``; Linux's default where unknown)."""
+    try:
+        with open("/proc/sys/vm/max_map_count", "rb") as f:
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return DEFAULT_MAX_MAP_COUNT
+
+
+def release_when_crowded(limit: int | None = None) -> bool:
+    """Release every compiled program of this process (``jax.clear_caches`` and the stored programs' calls) where
+    it has more than ``limit`` memory mappings (default: ``CROWDED_SHARE`` of ``vm.max_map_count``); returns
+    whether it did. The next call of a program compiles it again (from the compile cache where it is on).
+
+    Each XLA:CPU executable maps memory of its own, and a process that keeps every program it compiled passes the
+    kernel's limit: the test suite did (LLVM segfaulted at 93 % of the run, 2026-11-28), and so would a long-lived
+    process planning many different jobs (the S-curve stage's cuts make many grid sizes). Counting the mappings
+    reads ``/proc/self/maps`` (~0.1 ms per thousand)."""
+    limit = int(CROWDED_SHARE * max_map_count()) if limit is None else limit
+    if memory_maps() <= limit:
+        return False
+    with _LOCK:
+        for instance in list(_INSTANCES):
+            instance.calls.clear()
+        jax.clear_caches()
+    gc.collect()  # the executables go with the last Python objects that hold them
+    return True
 
 
 def cached_jit(
@@ -81,6 +132,7 @@ class _CachedJit:
         self.names = [k for k in self.signature.parameters if k not in static]  # the traced arguments, in order
         self.calls: dict[tuple, Callable | None] = {}  # key -> the stored program's call (None: jax.jit's)
         functools.update_wrapper(self, fun)
+        _INSTANCES.add(self)
 
     def __call__(self, *args, **kwargs):
         root = export_dir()

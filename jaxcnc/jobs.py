@@ -422,7 +422,9 @@ def _run_stages(
     written (:attr:`_Run.planned`), made before the checks so that the plan is freed under them (they read the
     table and the program alone: a 1 M-block contour's spans and time law, ~1 GB, are not held twice as long)."""
     from jaxcnc.format import TableFile
+    from jaxcnc.jitcache import release_when_crowded
 
+    release_when_crowded()  # a long-lived process: the programs of earlier jobs, before the limit on mappings
     st = Stages(progress, label)
     try:
         with st.stage("parse"):

@@ -18,30 +18,18 @@ os.environ.setdefault("JAXCNC_EXPORT_CACHE", "0")
 MAPS_LIMIT = 20_000
 
 
-def _memory_maps() -> int:
-    """The process's memory mappings (``/proc/self/maps`` lines; 0 where there is no procfs)."""
-    try:
-        with open("/proc/self/maps", "rb") as f:
-            return sum(1 for _ in f)
-    except OSError:
-        return 0
-
-
 @pytest.fixture(autouse=True, scope="module")
 def _compiled_programs_released():
     """After a module whose programs leave the process with more than ``MAPS_LIMIT`` memory mappings, JAX's compiled
-    programs are released (``jax.clear_caches``). Each XLA:CPU executable maps memory of its own; a process that
-    keeps every program the whole suite compiles passes Linux's ``vm.max_map_count`` (65,530) and LLVM segfaults
-    compiling or (de)serialising the next one: CI died at 93 % on 2026-11-28 once the jerk tests planned meander520
-    at 10 kHz as well (6,740 mappings for that test alone)."""
+    programs are released (:func:`jaxcnc.jitcache.release_when_crowded`). Each XLA:CPU executable maps memory of its
+    own; a process that keeps every program the whole suite compiles passes Linux's ``vm.max_map_count`` (65,530)
+    and LLVM segfaults compiling or (de)serialising the next one: CI died at 93 % on 2026-11-28 once the jerk tests
+    planned meander520 at 10 kHz as well (6,740 mappings for that test alone). The library's own threshold (half the
+    kernel's limit, checked as each job starts) would do for jobs alone; the suite also compiles outside jobs."""
     yield
-    if _memory_maps() > MAPS_LIMIT:
-        import gc
+    from jaxcnc.jitcache import release_when_crowded
 
-        import jax
-
-        jax.clear_caches()
-        gc.collect()
+    release_when_crowded(MAPS_LIMIT)
 
 
 REPO = Path(__file__).resolve().parents[1]

@@ -215,3 +215,33 @@ def test_a_cache_directory_that_cannot_be_written_falls_back_to_jax_jit(tmp_path
     assert list(_poly.calls.values()) == [None]  # looked up once, then plain jax.jit from now on
     assert blocker.read_text().startswith("a file")
     _poly.calls.clear()
+
+
+def test_compiled_programs_are_released_when_the_process_is_crowded():
+    """Each compiled program maps memory of its own: released, the mappings go back down, and the programs still
+    give the same values (compiled again)."""
+    xs = [jnp.arange(n, dtype=jnp.float64) for n in range(1, 61)]
+    c = {"a": jnp.float64(1.0)}
+    first = [np.asarray(_poly(x, c, power=2)["y"]) for x in xs]
+    assert _poly.jitted._cache_size() >= len(xs)
+    assert not jitcache.release_when_crowded(jitcache.max_map_count())  # far from the limit: kept
+    before = jitcache.memory_maps()
+    assert jitcache.release_when_crowded(0)
+    after = jitcache.memory_maps()
+    assert _poly.jitted._cache_size() == 0
+    assert after < before - 5 * len(xs), (before, after)  # ~17 mappings per XLA:CPU executable
+    again = [np.asarray(_poly(x, c, power=2)["y"]) for x in xs]
+    assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+
+
+@pytest.mark.parametrize("share, released", [(0.0, True), (1.0, False)])
+def test_every_job_starts_by_releasing_programs_when_crowded(monkeypatch, share, released):
+    """``plan_job`` checks the mappings as it starts (a long-lived process planning job after job)."""
+    from tests.conftest import make_machine
+    from tests.helpers import plan_text
+
+    _poly(jnp.ones(3), {"a": jnp.float64(0.0)}, power=1)
+    assert _poly.jitted._cache_size() > 0
+    monkeypatch.setattr(jitcache, "CROWDED_SHARE", share)
+    plan_text("G1 X1 F600\n", make_machine())
+    assert (_poly.jitted._cache_size() == 0) == released

@@ -16,6 +16,7 @@ from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
 from jaxcnc.machine import AxisConfig, MachineConfig
+from jaxcnc.jitcache import release_when_crowded
 from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.protocol import (
     Planner,
@@ -126,6 +127,7 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
     """Plan ``program`` on ``machine`` with ``planner``: a name, a :class:`Planner`, or ``None`` for the
     machine file's ``planner`` (``topp`` when it names none)."""
     t0 = time.perf_counter()
+    release_when_crowded()  # a long-lived process: the programs of earlier jobs, before the limit on mappings
     try:
         name, chosen = resolve_planner(machine_planner(machine) if planner is None else planner)
     except PlanningError as exc:
