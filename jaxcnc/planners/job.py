@@ -15,8 +15,8 @@ from jaxcnc.errors import PlanningError, SourceError
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
-from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.jitcache import release_when_crowded
+from jaxcnc.machine import AxisConfig, MachineConfig
 from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.protocol import (
     Planner,
