@@ -17,12 +17,21 @@ from jaxcnc.jobs import plan_file
 from jaxcnc.machine import MachineConfig, load_machine, parse_machine
 from jaxcnc.planners import PlanRequest, plan_job
 from jaxcnc.planners.job import span_feed
-from jaxcnc.planners.protocol import coordinate_extent_mm, machine_limits, request_limits
-from jaxcnc.planners.smoothing import SmoothPlan, blends_slower_than_stops, passed_speed
+from jaxcnc.planners.protocol import coordinate_extent_mm, jerk_substeps, machine_limits, request_limits
+from jaxcnc.planners.smoothing import (
+    NARROW_ROUNDS,
+    SmoothPlan,
+    blends_slower_than_stops,
+    narrow_windows,
+    passed_speed,
+    segment_groups,
+    smooth,
+)
+from jaxcnc.planners.timelaw import sample_plan
 from jaxcnc.planners.topp import plan_topp
 from jaxcnc.ticks.deviation import path_deviation
 from tests.conftest import machine_text, make_machine
-from tests.helpers import random_cubic_nurbs, table_of
+from tests.helpers import plan_text, random_cubic_nurbs, table_of
 from tests.test_curves import table_of_program
 
 
@@ -252,10 +261,11 @@ PEERS = Path(__file__).resolve().parents[1] / ".." / "shared" / "peers"
 @pytest.mark.skipif(not PEERS.is_dir(), reason="../shared/peers absent")
 def test_a_cam_program_under_a_jerk_limit_is_not_slowed_down_as_a_whole(tmp_path):
     """meander520 (the peers' CAM program: lines, small arcs, tiny blends) on the peers' 1 and 10 kHz machines with
-    j_max 1e6: 38.6 and 39.4 s against 34.0 s without the jerk limit, every table within every limit at every tick.
-    Until 2026-11-28: 51.2 s at 1 kHz and 152.2 s at 10 kHz (holds that did not hold inside lines and arcs, too
-    narrow at the tiny blends, and the global slow-down); 271.2 s at 1 kHz before that (blend pieces shorter than a
-    tick's step capped at 1e-3 mm/s)."""
+    j_max 1e6: 38.87 and 38.85 s against 34.0 s without the jerk limit, every table within every limit at every tick,
+    the two rates within 1 % (jerk measured at 10 kHz whatever the tick rate). 38.6 and 39.4 s before that (each
+    rate measured at its own: 2 % apart); 51.2 s at 1 kHz and 152.2 s at 10 kHz until 2026-11-28 (holds that did not
+    hold inside lines and arcs, too narrow at the tiny blends, and the global slow-down); 271.2 s at 1 kHz before that
+    (blend pieces shorter than a tick's step capped at 1e-3 mm/s)."""
     program = load_gcode(PEERS / "programs" / "meander520.ngc")
     times = {}
     for hz in (1000, 10000):
@@ -266,7 +276,7 @@ def test_a_cam_program_under_a_jerk_limit_is_not_slowed_down_as_a_whole(tmp_path
         assert meas.ok, meas.violations[:3]
         times[hz] = job.plan.total_time_s
         assert times[hz] <= 1.2 * free, (hz, times[hz], free)
-    assert abs(times[10000] / times[1000] - 1) <= 0.03, times
+    assert abs(times[10000] / times[1000] - 1) <= 0.01, times
 
 
 def test_casadi_reference_with_jerk_rows(tmp_path):
@@ -364,3 +374,86 @@ def test_a_long_curve_whose_excess_is_at_its_end_is_held_there_alone():
     where[0, 1] = s0[1] + 10.0  # the middle of the arc: the feed caps
     rows, left = _end_excess(curved, spans, s0, excess, where, 0.02, 1.0)
     assert left.tolist() == [1, 2] and rows.shape == (0, 3)
+
+
+def test_a_plan_on_a_finer_tick_grid_is_the_same_motion():
+    """``Plan.finer`` and ``SmoothPlan.finer``: tick ``k i`` of the finer grid is tick ``i`` of the plan, at the same
+    path length; the jerk stage measures a 1 kHz table's motion on its 10 kHz grid."""
+    text = "G61\nG1 X10 F3000\nY10\nG4 P0.05\nG2 X20 Y10 I5 J0\nG64 P0.01\nG1 X30 Y12\nX40 Y10\nM2\n"
+    job = plan_text(text, make_machine(tick_hz=1000))
+    plan, k = job.plan, jerk_substeps(1000)
+    assert k == 10
+    fine = plan.finer(k)
+    assert fine.n_ticks == k * plan.n_ticks and fine.tick_hz == k * plan.tick_hz
+    ticks = np.arange(plan.n_ticks + 1)
+    _, s, v = sample_plan(plan, ticks)
+    _, s_fine, v_fine = sample_plan(fine, k * ticks)
+    np.testing.assert_allclose(s_fine, s, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(v_fine, v, rtol=0, atol=1e-6)
+    _, s_all, _ = sample_plan(fine, np.arange(fine.n_ticks + 1))
+    assert np.all(np.diff(s_all) >= -1e-12) and s_all[-1] == pytest.approx(s[-1], abs=1e-9)
+    smooth_plan = smooth(plan, 25, job.spans.s0)
+    np.testing.assert_allclose(smooth_plan.finer(k).s_at(k * ticks), smooth_plan.s_at(ticks), rtol=0, atol=1e-9)
+
+
+def test_jerk_within_the_limit_on_the_finer_grid_is_within_it_on_the_tables():
+    """A table's finite differences over ``k`` fine ticks are weighted means of the fine ones: the maxima the stage
+    measures on its fine grid bound those the check reads on the table."""
+    assert [jerk_substeps(f) for f in (500, 1000, 4000, 10_000, 25_000)] == [20, 10, 3, 1, 1]
+    rng = np.random.default_rng(3)
+    h = 1e-4
+    for k in (3, 10):
+        x = np.cumsum(np.cumsum(np.cumsum(rng.normal(size=3000)))) * h**3
+        for order in (1, 2, 3):
+            fine = np.abs(np.diff(x, order)).max() / h**order
+            coarse = np.abs(np.diff(x[::k], order)).max() / (k * h) ** order
+            assert coarse <= fine * (1 + 1e-12), (k, order)
+
+
+def test_each_group_keeps_the_narrowest_window_that_holds():
+    """``narrow_windows``: a rest-to-rest group's window is narrowed where the limits hold (a measurement that asks
+    each group for its own width), never below what it needs, and the result is measured once more."""
+    job = plan_text("G61\nG1 X10 F3000\nY10\nX0\nY0\nX5\nM2\n", make_machine(tick_hz=1000))
+    sp = smooth(job.plan, 30, job.spans.s0)
+    group = segment_groups(sp.base)
+    moving = np.flatnonzero(sp.g_len > 0)
+    assert moving.size == 5  # (M2: a group that does not move)
+    need = np.full(sp.g_window.size, 3)
+    need[moving] = [30, 5, 12, 3, 21]
+
+    def measure(c):
+        bad_group = c.g_window < need
+        worst = np.zeros((2, len(job.spans)))
+        worst[1, c.base.span] = np.where(bad_group[group], 2.0, 0.5)
+        return worst
+
+    out = narrow_windows(sp, 3, measure)
+    assert np.all(out.g_window >= need) and np.all(out.g_window <= 30), out.g_window
+    assert out.g_window[moving[0]] == 30 and out.g_window[moving[3]] == 3  # W = A/J where it holds
+    assert out.n_ticks < sp.n_ticks
+    np.testing.assert_allclose(out.s_at(np.array([out.n_ticks])), sp.s_at(np.array([sp.n_ticks])))
+    # a measurement that breaks the narrowed plan as a whole: the plan is kept as it was
+    calls = []
+
+    def flaky(c):
+        calls.append(c)
+        return measure(c) if len(calls) <= NARROW_ROUNDS else np.full((2, len(job.spans)), 2.0)
+
+    assert narrow_windows(sp, 3, flaky) is sp
+
+
+def test_a_kink_on_an_exact_path_stops_under_a_jerk_limit(tmp_path):
+    """G64 P0 keeps a 0.57° kink: passed moving, the axis's velocity steps within one tick, a jerk of ``v |ΔT| f²``
+    that only ~0.05 mm/s keeps within J at 10 kHz — below what an S-curve gains in a window, so the junction is a
+    stop (two rest-to-rest groups), at 1 and 10 kHz alike. Until 2026-11-28 the junction's acceleration cap alone
+    applied and the red-team's fz_3 read 6.6x J at such a kink measured at 10 kHz."""
+    text = "G64 P0\nG1 X50 F6000\nG1 X100 Y0.5\nM2\n"
+    times = {}
+    for hz in (1000, 10000):
+        job, _, meas = table_of(
+            text, make_machine(tick_hz=hz, v=250, a=3000, rapid=250, j=1e5), tmp_path, f"k{hz}.ticks"
+        )
+        assert meas.ok, meas.violations[:3]
+        assert int(np.count_nonzero(job.plan.g_len > 0)) == 2
+        times[hz] = job.plan.total_time_s
+    assert abs(times[10000] / times[1000] - 1) <= 0.01, times

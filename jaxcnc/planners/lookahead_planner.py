@@ -20,7 +20,7 @@ from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.limits import junctions, span_caps
 from jaxcnc.planners.lookahead import lookahead
 from jaxcnc.planners.motion import trapezoids
-from jaxcnc.planners.protocol import Planner, PlanRequest
+from jaxcnc.planners.protocol import Planner, PlanRequest, jerk_limits, step_rate_hz
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import Plan, align_to_ticks, plan_from_outputs
 
@@ -45,13 +45,18 @@ def plan_arrays(
     a_max,
     chord_tol,
     tick_hz,
+    step_hz,
+    j_max=None,
 ):
-    """The planner as one array program; all span arrays ``(n,)`` or ``(n, 3)``.
+    """The planner as one array program; all span arrays ``(n,)`` or ``(n, 3)``. ``step_hz``: the rate whose tick a
+    velocity step at a kink is spread over (the tick rate; under jerk limits the rate they are measured at);
+    ``j_max``: ``(3,)`` the jerk limits that cap kinks too (:func:`~jaxcnc.planners.limits.kink_jerk_caps`), or
+    ``None``.
 
     Returns the dict of :func:`~jaxcnc.planners.timelaw.align_to_ticks` plus ``x_node`` (v² at
     the ``n+1`` nodes).
     """
-    at_kink, x_junction = junctions(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
+    at_kink, x_junction = junctions(kind, tangent_in, tangent_out, stop_before, a_max, step_hz, j_max)
     x_cap, a_t = span_caps(
         kind, length, kappa, d1, d2, tangent_in, moving, feed, v_max, a_max, chord_tol, tick_hz, at_kink
     )
@@ -91,6 +96,8 @@ def plan_lookahead(req: PlanRequest) -> Plan:
         np.asarray(req.a_max),
         machine.path.chord_tol_mm,
         machine.tick_hz,
+        step_rate_hz(req),
+        jerk_limits(req),
     )
     return plan_from_outputs(jax.device_get(out), spans.length, np.arange(n), np.zeros(n), machine.tick_hz)
 

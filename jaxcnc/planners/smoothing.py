@@ -46,7 +46,15 @@ from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans
 from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.motion import trapezoid_integral
-from jaxcnc.planners.protocol import DeviceLaw, Planner, PlanRequest, TimeLaw, machine_limits, with_margin
+from jaxcnc.planners.protocol import (
+    DeviceLaw,
+    Planner,
+    PlanRequest,
+    TimeLaw,
+    jerk_substeps,
+    machine_limits,
+    with_margin,
+)
 from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
 
 CHUNK = 1 << 16
@@ -58,20 +66,23 @@ HOLD_WIDEN = 0.25
 #: speed measured there each round keeps (before the global slow-down; :func:`jerk_limited`).
 SQUEEZE_ROUNDS = 6
 SQUEEZE = 0.7
+#: Plans measured to narrow each group's window once the stage holds the limits (:func:`narrow_windows`).
+NARROW_ROUNDS = 4
 
 
 @dataclass(frozen=True, eq=False)
 class SmoothPlan(TimeLaw):
-    """A :class:`Plan` whose groups' ``s(t)`` is averaged over ``window_ticks`` ticks (a :class:`TimeLaw`).
+    """A :class:`Plan` whose groups' ``s(t)`` are averaged over windows of whole ticks (a :class:`TimeLaw`).
 
-    Group arrays ``(n_groups,)``: ``g_start`` (tick where the group starts in the base plan),
+    Group arrays ``(n_groups,)``: ``g_window`` (the group's window, in ticks), ``g_start`` (tick where the group
+    starts in the base plan),
     ``g_ticks`` (its whole ticks there), ``g_new_start`` (where it starts here), ``g_s0`` (path
     length at its start), ``g_len`` (its path length). ``span_s0`` ``(n_spans,)``: path length from the
     program start to each span's start. ``alpha``: the acceleration scale the base plan was made with.
     """
 
     base: Plan
-    window_ticks: int
+    g_window: np.ndarray
     g_start: np.ndarray
     g_ticks: np.ndarray
     g_new_start: np.ndarray
@@ -90,7 +101,12 @@ class SmoothPlan(TimeLaw):
 
     @property
     def n_ticks(self) -> int:
-        return self.base.n_ticks + int(np.count_nonzero(self.g_len > 0)) * self.window_ticks
+        return self.base.n_ticks + int(np.sum(self.g_window[self.g_len > 0]))
+
+    @property
+    def window_ticks(self) -> int:
+        """The widest group's window, in ticks."""
+        return int(self.g_window.max(initial=0))
 
     @property
     def total_time_s(self) -> float:
@@ -120,6 +136,11 @@ class SmoothPlan(TimeLaw):
         ticks = self.ticks_at_s(self.g_s0[group] + self.seg_s_in_group[first])
         return np.where(base.offset_ticks[first] == 0.0, self.g_new_start[group], ticks)
 
+    def finer(self, k: int) -> SmoothPlan:
+        """The same motion on a tick grid ``k`` times finer (:meth:`~jaxcnc.planners.timelaw.Plan.finer`, the
+        window ``k`` times as many ticks): tick ``k i`` there is tick ``i`` here."""
+        return self if k == 1 else smooth(self.base.finer(k), self.g_window * k, self.span_s0, self.alpha)
+
     def ticks_at(self, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
         """The first tick at which segment ``seg`` has covered ``s`` mm (of the averaged motion)."""
         return self.ticks_at_s(self.span_s0[self.span[seg]] + self.s_start[seg] + s)
@@ -130,7 +151,7 @@ class SmoothPlan(TimeLaw):
         span_s0 = np.full(bucket_size(n), np.inf)
         span_s0[:n] = self.span_s0
         arrays = dict(self._device, span_s0=jax.device_put(span_s0))
-        return DeviceLaw(SmoothLaw(self.window_ticks, self.tick_hz), arrays)
+        return DeviceLaw(SmoothLaw(self.tick_hz), arrays)
 
     @cached_property
     def _device(self) -> dict[str, jnp.ndarray]:
@@ -147,7 +168,7 @@ class SmoothPlan(TimeLaw):
         out["length"] = pad(base.length)
         out["seg_s_in_group"] = pad(self.seg_s_in_group)
         out["seg_prefix"] = pad(self.seg_prefix)
-        for k in ("g_start", "g_ticks", "g_new_start", "g_s0", "g_len", "g_first_seg", "g_last_seg"):
+        for k in ("g_window", "g_start", "g_ticks", "g_new_start", "g_s0", "g_len", "g_first_seg", "g_last_seg"):
             out[k] = jax.device_put(getattr(self, k))
         return out
 
@@ -159,9 +180,7 @@ class SmoothPlan(TimeLaw):
         for i in range(0, t.shape[0], CHUNK):
             part = t[i : i + CHUNK]
             padded = np.pad(part, (0, CHUNK - part.shape[0]), mode="edge") if part.size else part
-            out[i : i + part.shape[0]] = np.asarray(s_of_ticks(arrays, padded, self.window_ticks, self.tick_hz))[
-                : part.shape[0]
-            ]
+            out[i : i + part.shape[0]] = np.asarray(s_of_ticks(arrays, padded, self.tick_hz))[: part.shape[0]]
         return out
 
     def ticks_at_s(self, s: np.ndarray) -> np.ndarray:
@@ -205,22 +224,23 @@ def _group_integral(plan: dict, g: jnp.ndarray, tau: jnp.ndarray, tick_hz: float
 class SmoothLaw:
     """A :class:`SmoothPlan`'s :class:`~jaxcnc.planners.protocol.DeviceLaw` function (static: hashable by value)."""
 
-    window_ticks: int
     tick_hz: float
 
     def __call__(self, arrays: dict, tick: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
         """``(span, s in span)`` at integer ``tick``: ``s_W`` from the program start, then its span."""
-        s = s_of_ticks(arrays, tick, self.window_ticks, self.tick_hz)
+        s = s_of_ticks(arrays, tick, self.tick_hz)
         span_s0 = arrays["span_s0"]
         span = jnp.clip(jnp.searchsorted(span_s0, s, side="right") - 1, 0, span_s0.shape[0] - 1)
         return span, s - span_s0[span]
 
 
-@cached_jit(static_argnames=("window_ticks", "tick_hz"))
-def s_of_ticks(plan: dict, ticks: jnp.ndarray, window_ticks: int, tick_hz: float) -> jnp.ndarray:
-    """Averaged path length ``s_W`` at integer ``ticks`` ``(m,)``: ``(A(t) - A(t - W)) / W`` in its group."""
+@cached_jit(static_argnames=("tick_hz",))
+def s_of_ticks(plan: dict, ticks: jnp.ndarray, tick_hz: float) -> jnp.ndarray:
+    """Averaged path length ``s_W`` at integer ``ticks`` ``(m,)``: ``(A(t) - A(t - W)) / W`` in its group (``W``
+    the group's window)."""
     g = jnp.clip(jnp.searchsorted(plan["g_new_start"], ticks, side="right") - 1, 0, plan["g_new_start"].shape[0] - 1)
     tau = ticks - plan["g_new_start"][g]
+    window_ticks = plan["g_window"][g]
     w_s = window_ticks / tick_hz
     area = _group_integral(plan, g, tau, tick_hz) - _group_integral(plan, g, tau - window_ticks, tick_hz)
     return plan["g_s0"][g] + jnp.clip(area / w_s, 0.0, plan["g_len"][g])
@@ -233,14 +253,20 @@ def _segment_integral_np(plan: Plan) -> np.ndarray:
     return np.asarray(_segment_integral_jit(arrays, np.arange(len(plan)), plan.duration_s))
 
 
-def smooth(plan: Plan, window_ticks: int, span_s0: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
-    """Average ``plan``'s groups over ``window_ticks`` ticks; ``span_s0``: path length at each span's start."""
+def segment_groups(plan: Plan) -> np.ndarray:
+    """``(n_segments,)`` the rest-to-rest group of each segment of ``plan`` (0, 1, … in order)."""
+    group_tick = plan.group_tick
+    return np.cumsum(np.concatenate([[True], group_tick[1:] != group_tick[:-1]])) - 1
+
+
+def smooth(plan: Plan, window_ticks: int | np.ndarray, span_s0: np.ndarray, alpha: float = 1.0) -> SmoothPlan:
+    """Average ``plan``'s groups over ``window_ticks`` ticks (one for all, or ``(n_groups,)``, each group's own);
+    ``span_s0``: path length at each span's start."""
     s_start_of_segment = span_s0[plan.span] + plan.s_start
-    first = np.concatenate([[True], plan.group_tick[1:] != plan.group_tick[:-1]])  # a group's first segment
-    starts = np.flatnonzero(first)
+    group = segment_groups(plan)
+    starts = np.flatnonzero(np.diff(group, prepend=-1))  # each group's first segment
     g_start = plan.group_tick[starts].astype(np.int64)
     g_ticks = np.diff(np.concatenate([g_start, [plan.n_ticks]])).astype(np.int64)
-    group = np.cumsum(first) - 1
     g_s0 = s_start_of_segment[starts]
     g_len = np.bincount(group, weights=plan.length, minlength=starts.size)
     seg_s_in_group = s_start_of_segment - g_s0[group]
@@ -248,11 +274,12 @@ def smooth(plan: Plan, window_ticks: int, span_s0: np.ndarray, alpha: float = 1.
     whole = seg_s_in_group * plan.duration_s + _segment_integral_np(plan)
     csum = np.cumsum(whole)
     seg_prefix = csum - whole - (csum - whole)[starts][group]  # exclusive sum within the group
-    moving = (g_len > 0).astype(np.int64)  # groups that move grow by the window; dwells and events do not
-    g_new_start = g_start + (np.cumsum(moving) - moving) * window_ticks
+    g_window = np.broadcast_to(np.asarray(window_ticks, np.int64), starts.shape).copy()
+    grow = np.where(g_len > 0, g_window, 0)  # groups that move grow by their window; dwells and events do not
+    g_new_start = g_start + (np.cumsum(grow) - grow)
     return SmoothPlan(
         base=plan,
-        window_ticks=int(window_ticks),
+        g_window=g_window,
         g_start=g_start,
         g_ticks=g_ticks,
         g_new_start=g_new_start,
@@ -430,7 +457,7 @@ def blends_slower_than_stops(
     ``K'`` at all and was kept: a red-team program of tiny arcs (``benchmarks/programs/jerk_redteam/fz_1.ngc``)
     planned to 570.7 s at 10 kHz that way, 16.1 s with the total variation. At speed ``v`` an axis sees ``K' v³`` of
     jerk, so the S-curve stage passes it at
-    ``v_p ≤ min((s J / K')^(1/3), √(A / K), V)`` (``s`` = topp's ``JERK_SHARE``, ``V`` the feed, ``A`` and ``J``
+    ``v_p ≤ min((s J / K')^(1/3), √(A / K), V)`` (``s`` = ``limits.JERK_SHARE``, ``V`` the feed, ``A`` and ``J``
     the axes' limits), at a constant speed from ``v_p W / 2`` before it to as far
     after it (:func:`minima_holds`; ``W = A / J``, the window). Against a stop at the corner (one more
     rest-to-rest group: ``W`` more), a pass from ``V`` down to ``v_p`` and back takes
@@ -448,7 +475,7 @@ def blends_slower_than_stops(
     seconds). A 1° kink of a CAM contour keeps its blend. The estimates lean towards blending (the lower bound
     of ``K'``, the largest ``J``, the smallest ``A`` of the axes the blend moves).
     """
-    from jaxcnc.planners.topp import JERK_SHARE
+    from jaxcnc.planners.limits import JERK_SHARE
 
     out = np.zeros(rows, bool)
     is_blend = spans.kind == SpanKind.BLEND
@@ -486,6 +513,39 @@ def blends_slower_than_stops(
     return out
 
 
+def narrow_windows(sp: SmoothPlan, floor: int, measure) -> SmoothPlan:
+    """``sp`` (within the limits) with each rest-to-rest group's window narrowed, where the limits still hold, towards
+    ``floor`` ticks (``W = A/J``): bisection per group between the widest window measured to break a limit and the
+    narrowest that holds, ``NARROW_ROUNDS`` plans measured (``measure(plan)``: :func:`span_peaks`' ``(2, n_spans)``
+    ratios).
+
+    The stage widens one window for the whole program while that helps; a window costs its length once per group,
+    and most groups did not need it wider. Given the base plan, a group's averaged motion depends on its own window
+    alone (groups start and end at rest), so one plan measures a trial window for every group at once; a group that
+    breaks a limit there keeps a wider one. The windows kept are measured together once more (the finite differences
+    across a junction of two groups read both); should anything break, ``sp`` is returned as it was."""
+    base, margin = sp.base, 1.0 - 1e-6
+    group = segment_groups(base)
+    n_groups = sp.g_window.size
+    good = sp.g_window.copy()  # the narrowest window measured to keep the limits
+    fail = np.full(n_groups, floor - 1)  # the widest measured to break one (floor - 1: none yet)
+    for r in range(NARROW_ROUNDS):
+        open_ = good - fail > 1  # groups whose narrowest window is not settled yet
+        if not open_.any():
+            break
+        trial = good.copy()
+        trial[open_] = floor if r == 0 else (fail[open_] + good[open_]) // 2  # first W = A/J itself
+        bad_span = measure(smooth(base, trial, sp.span_s0, sp.alpha)).max(axis=0) > margin
+        bad = np.zeros(n_groups, bool)
+        bad[group[bad_span[base.span]]] = True
+        fail = np.where(open_ & bad, trial, fail)
+        good = np.where(open_ & ~bad, trial, good)
+    if np.array_equal(good, sp.g_window):
+        return sp
+    out = smooth(base, good, sp.span_s0, sp.alpha)
+    return out if measure(out).max() <= margin else sp
+
+
 def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -> SmoothPlan:
     """Plan ``request`` with ``planner`` so that the machine's ``j_max`` also holds at every tick.
 
@@ -506,6 +566,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     """
     margin = 1.0 - 1e-6  # the table is sampled from these very positions; the verifier allows its rounding
     f = request.machine.tick_hz
+    substeps = jerk_substeps(f)
     spans = request.spans
     v_max, a_max, j_max = machine_limits(request.machine)  # what the table is verified against
     span_s0 = spans.s0
@@ -524,13 +585,26 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                 f"planner {planner.name!r} returned a {type(base).__name__}; the S-curve stage (j_max is set) "
                 "averages a Plan's trapezoids: return a Plan, or declare handles_jerk = True"
             )
-        with np.errstate(invalid="ignore"):  # (an axis that never moves has no jerk: its A/J does not count)
-            ratio = np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
-        window = max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
+        window = max(1, math.ceil(float(np.max(base_ratio(alpha))) * stretch * f - 1e-9))
         sp = smooth(base, window, span_s0, alpha)
-        # a and j are compared with the margin, speeds with the limit itself (the plan keeps the margin below it)
-        worst, speed, where = span_peaks(sp, spans, v_max / margin, a_max, j_max)
+        # a and j are compared with the margin, speeds with the limit itself (the plan keeps the margin below it); on
+        # a grid of at least JERK_MEASURE_HZ, whose limits hold on the table's ticks as well
+        worst, speed, where = span_peaks(sp.finer(substeps), spans, v_max / margin, a_max, j_max)
         return sp, worst, speed, where
+
+    def narrowed(sp: SmoothPlan) -> SmoothPlan:
+        """``sp`` with each group's window as narrow as the limits allow (:func:`narrow_windows`)."""
+        floor = max(1, math.ceil(float(np.max(base_ratio(sp.alpha))) * f - 1e-9))
+        return narrow_windows(
+            sp, floor, lambda c: span_peaks(c.finer(substeps), spans, v_max / margin, a_max, j_max)[0]
+        )
+
+    def base_ratio(alpha: float) -> np.ndarray:
+        """``(axes,)`` ``A/J`` of the base plan's acceleration (the margin below ``a_max * alpha``): a line's jerk
+        ``A/W`` keeps the margin below ``J`` with ``W`` at its whole ticks (an ``A/J`` of whole ticks is one)."""
+        a = with_margin(a_max * alpha)
+        with np.errstate(invalid="ignore"):  # (an axis that never moves has no jerk: its A/J does not count)
+            return np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
 
     alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf
     widen, best_j, stalled = HOLD_WIDEN, np.inf, 0
@@ -542,7 +616,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             *(it, excess_a, excess_j, int((worst[1] > margin).sum()), alpha, sp.window_ticks, sp.total_time_s),
         )
         if max(excess_a, excess_j) <= margin:
-            return sp
+            return narrowed(sp)
         if not widening:
             if excess_j < 0.98 * best_j:
                 best_j, stalled = excess_j, 0
@@ -555,7 +629,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                 if stalled > 4:
                     break
         rows = minima_holds(sp.base, span_s0[sp.base.span] + sp.base.s_start, sp.window_ticks / f, widen)
-        rows = _widen_where_bad(rows, span_s0, worst[1] > margin, sp.window_ticks / f)
+        rows = _widen_where_bad(rows, span_s0, worst.max(axis=0) > margin, sp.window_ticks / f)
         holds = rows if holds is None else np.concatenate([holds, rows])
         if it == 0:
             continue  # first let the held minima act
@@ -616,7 +690,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             sp, worst, speed, where = attempt(feed, alpha, holds, stretch)
             log.debug("jerk squeeze: v/a %.4f, j %.4f, %.4f s", worst[0].max(), worst[1].max(), sp.total_time_s)
             if worst.max() <= margin:
-                return sp
+                return narrowed(sp)
     best = None  # fall back: the whole program slower (jerk falls like v³ on curves, v² A on lines)
     for use_holds in (holds, None):
         a_fb, feed_fb, speed_fb = alpha, feed, speed
@@ -629,7 +703,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                     best = sp
                 break
     if best is not None:
-        return best
+        return narrowed(best)
     raise PlanningError(
         f"{request.machine.source}: no plan keeps the jerk limits j_max = {j_max} mm/s³ "
         "(is j_max tiny against a_max and the tick rate?)"

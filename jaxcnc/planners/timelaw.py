@@ -251,6 +251,19 @@ class Plan(TimeLaw):
             return self._ticks_of(name, np.arange(k0, max(k0, k1)))
         raise KeyError(f"a Plan has no column {name!r}")
 
+    def finer(self, k: int) -> Plan:
+        """The same motion on a tick grid ``k`` times finer (``tick_hz * k``; every stored column made whole): each
+        group starts on the same instant (tick ``k`` times its tick here), each segment at the same offset (``k``
+        times its offset in ticks) and lasts as long, and ``first_tick`` is the first fine tick at or after its
+        start. A tick here is tick ``k`` times it there, at the same position."""
+        if k == 1:
+            return self
+        cols = {name: self.column(name) for name in PLAN_COLUMNS}
+        cols["group_tick"] = cols["group_tick"] * k
+        cols["offset_ticks"] = cols["offset_ticks"] * k
+        cols["first_tick"] = cols["group_tick"] + np.ceil(cols["offset_ticks"]).astype(np.int64)
+        return Plan(cols, self.n_ticks * k, self.tick_hz * k)
+
     def _ramp_rows(self, k0: int, k1: int) -> dict[str, np.ndarray]:
         """``vp``, ``t_acc``, ``t_cru``, ``t_dec`` of segments ``k0..k1-1`` from :attr:`ramps`."""
         k1 = max(k0, k1)

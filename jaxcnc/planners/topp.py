@@ -53,7 +53,7 @@ from jaxcnc.planners.grid import (
     join_pieces,
     node_frames,
 )
-from jaxcnc.planners.limits import JUNCTION_SHARE, chord_speed, curvature_columns, junctions
+from jaxcnc.planners.limits import JERK_SHARE, JUNCTION_SHARE, chord_speed, curvature_columns, junctions
 from jaxcnc.planners.lookahead_planner import plan_lookahead
 from jaxcnc.planners.phaseplane import (
     backward_pieces,
@@ -65,7 +65,7 @@ from jaxcnc.planners.phaseplane import (
     static_cap,
     window_pieces,
 )
-from jaxcnc.planners.protocol import Planner, PlanRequest
+from jaxcnc.planners.protocol import Planner, PlanRequest, jerk_limits, step_rate_hz
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import (
     RAMP_COLUMNS,
@@ -86,8 +86,6 @@ REFINE_FACTOR = 4
 BIG = 1e30
 #: Most intervals a line is cut into so that a hold inside it has nodes (see :func:`hold_counts`).
 MAX_HOLD_CUTS = 4096
-#: Share of an axis' jerk limit the curvature's change may take at constant speed (see :func:`jerk_cap`).
-JERK_SHARE = 0.5
 
 
 def speed_cap(
@@ -381,13 +379,13 @@ def interval_share(at_kink, curved):
     return xp.where(at_kink, 1.0 - JUNCTION_SHARE, 1.0) * xp.where(curved, 1.0 - GRID_MARGIN, 1.0)
 
 
-def _junction_facts(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz):
+def _junction_facts(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz, j_max=None):
     """:func:`~jaxcnc.planners.limits.junctions` of the whole program (padded span arrays), compiled without
     XLA:CPU's YNNPACK fusions (:func:`~jaxcnc.geometry.blend_kernel.cpu_loop_options`): its norms, maxima and
     minima over rows of three went to them, and took twice the time (1 M blocks: 24 -> 11 ms CPU; the same bits
     on the CAM contour — minima and maxima in any order are the same, and the norms' sums of three squares
     decide a corner only at a turn within a rounding of 1°)."""
-    return _junction_program()(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz)
+    return _junction_program()(kind, tangent_in, tangent_out, stop_before, a_max, tick_hz, j_max)
 
 
 @cache
@@ -560,7 +558,8 @@ def curvature_step_caps(spans: Spans, j_max: np.ndarray, tick_hz: float) -> np.n
     ``v`` the axis's acceleration steps by ``ΔK_i v²`` within one tick, a jerk of ``ΔK_i v² f`` at tick rate ``f``,
     kept within ``JERK_SHARE`` of ``J_i``. Such steps remain where a junction may not be blended (G61, a beam that
     changes, no tolerance); blended junctions are G2 under jerk limits (:func:`~jaxcnc.geometry.blend.blend_path`).
-    Inherently tied to the tick rate: the jerk of a step is measured one tick wide."""
+    Inherently tied to a rate: the jerk of a step is measured one tick wide (the planner passes the rate the
+    S-curve stage measures at)."""
     n = len(spans)
     caps = np.full(max(n - 1, 0), np.inf)
     curved = is_curved(spans.kind)
@@ -601,17 +600,20 @@ class _ProgramFacts:
         spans = req.spans
         n = len(spans)
         nb = bucket_size(n)
+        step_hz = step_rate_hz(req)  # a velocity or curvature step is one tick of it wide
         at_kink, x_junction = _junction_facts(
             _pad_aligned(spans.kind, nb, SpanKind.POINT),
             _pad_aligned(spans.tangent_in, nb, 0.0),
             _pad_aligned(spans.tangent_out, nb, 0.0),
             _pad_aligned(req.stop_before, nb, True),
             np.asarray(req.a_max),
-            req.machine.tick_hz,
+            step_hz,
+            jerk_limits(req),
         )
         x_junction = np.asarray(x_junction)[: n - 1]
         if req.j_max is not None and np.any(np.isfinite(req.j_max)):
-            x_junction = np.minimum(x_junction, curvature_step_caps(spans, np.asarray(req.j_max), req.machine.tick_hz))
+            j_max = np.asarray(req.j_max)
+            x_junction = np.minimum(x_junction, curvature_step_caps(spans, j_max, step_hz))
         zero = np.zeros(1)
         moves = spans.moving_axes & np.isfinite(req.a_max)
         return _ProgramFacts(
