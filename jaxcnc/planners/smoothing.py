@@ -400,7 +400,8 @@ def _with_neighbours(mask: np.ndarray) -> np.ndarray:
 
 
 def _widen_where_bad(rows: np.ndarray, span_s0: np.ndarray, bad: np.ndarray, window_s: float) -> np.ndarray:
-    """Hold rows (:func:`minima_holds`) whose minimum lies on a span with jerk excess (``bad``) or next to one, held
+    """Hold rows (:func:`minima_holds`) whose minimum lies on a span that breaks a limit (``bad``: the jerk, or the
+    acceleration where a velocity steps at a kink) or next to one, held
     over the whole window: half a window's path ``v W / 2`` either side, so that the average at the minimum is the
     minimum itself.
 
@@ -562,7 +563,11 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     feed cap from the speed measured there and the excess (a long curve whose worst jerk lies at one of its ends is
     held there instead, :func:`_end_excess`); acceleration excess scales the acceleration down. If that stalls, the
     places that still break a limit are slowed down alone (``SQUEEZE_ROUNDS``), then a global slow-down ends the
-    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`.
+    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`. The valid plan's windows are then narrowed
+    group by group where the limits still hold (:func:`narrow_windows`).
+
+    Every measurement is made at ``jerk_substeps(f)`` fine ticks per tick (10 kHz at least): what holds there holds
+    on the table's ticks, and a 1 kHz and a 10 kHz table of the same program plan to the same time.
     """
     margin = 1.0 - 1e-6  # the table is sampled from these very positions; the verifier allows its rounding
     f = request.machine.tick_hz
