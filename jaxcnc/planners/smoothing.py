@@ -55,7 +55,7 @@ from jaxcnc.planners.protocol import (
     machine_limits,
     with_margin,
 )
-from jaxcnc.planners.timelaw import PLAN_KEYS, Plan, segment_of_tick
+from jaxcnc.planners.timelaw import PLAN_COLUMNS, PLAN_KEYS, Plan, segment_of_tick
 
 CHUNK = 1 << 16
 log = logging.getLogger(__name__)
@@ -547,6 +547,37 @@ def narrow_windows(sp: SmoothPlan, floor: int, measure) -> SmoothPlan:
     return out if measure(out).max() <= margin else sp
 
 
+def group_bad(sp: SmoothPlan, worst: np.ndarray, margin: float) -> np.ndarray:
+    """``(n_groups,)`` bool: the rest-to-rest groups of ``sp`` that hold a span breaking a limit (``worst``:
+    :func:`span_peaks`' ``(2, n_spans)`` ratios, compared with ``margin``)."""
+    bad = np.zeros(sp.g_window.size, bool)
+    bad[segment_groups(sp.base)[(worst.max(axis=0) > margin)[sp.base.span]]] = True
+    return bad
+
+
+def splice_groups(plans: list[SmoothPlan], choice: np.ndarray) -> SmoothPlan:
+    """One plan whose rest-to-rest group ``g`` is group ``g`` of ``plans[choice[g]]`` (its segments and window).
+
+    The plans have the same groups (the same rests: ``g_s0`` equal). A group starts and ends at rest, so its motion
+    is its own: the groups' segments are joined in order, each group's ticks placed after the ones before it."""
+    first = plans[0]
+    g_ticks = np.array([plans[c].g_ticks[g] for g, c in enumerate(choice)], np.int64)
+    g_start = np.cumsum(g_ticks) - g_ticks
+    parts: dict[str, list[np.ndarray]] = {name: [] for name in PLAN_COLUMNS}
+    for g, c in enumerate(choice):
+        sp = plans[c]
+        k0, k1 = int(sp.g_first_seg[g]), int(sp.g_last_seg[g]) + 1
+        for name in PLAN_COLUMNS:
+            col = sp.base.column(name, k0, k1)
+            if name in ("group_tick", "first_tick"):
+                col = col - sp.base.column("group_tick", k0, k1) + g_start[g]
+            parts[name].append(col)
+    columns = {name: np.concatenate(cols) for name, cols in parts.items()}
+    base = Plan(columns, int(g_ticks.sum()), first.base.tick_hz)
+    window = np.array([plans[c].g_window[g] for g, c in enumerate(choice)], np.int64)
+    return smooth(base, window, first.span_s0, first.alpha)
+
+
 def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -> SmoothPlan:
     """Plan ``request`` with ``planner`` so that the machine's ``j_max`` also holds at every tick.
 
@@ -563,8 +594,10 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     feed cap from the speed measured there and the excess (a long curve whose worst jerk lies at one of its ends is
     held there instead, :func:`_end_excess`); acceleration excess scales the acceleration down. If that stalls, the
     places that still break a limit are slowed down alone (``SQUEEZE_ROUNDS``), then a global slow-down ends the
-    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`. The valid plan's windows are then narrowed
-    group by group where the limits still hold (:func:`narrow_windows`).
+    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`. Each rest-to-rest group of the valid plan
+    then takes the fastest motion any attempt measured within the limits for it (:func:`splice_groups`: the later
+    rounds' remedies serve the groups that still broke one), and its window is narrowed where the limits still hold
+    (:func:`narrow_windows`).
 
     Every measurement is made at ``jerk_substeps(f)`` fine ticks per tick (10 kHz at least): what holds there holds
     on the table's ticks, and a 1 kHz and a 10 kHz table of the same program plan to the same time.
@@ -595,7 +628,38 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
         # a and j are compared with the margin, speeds with the limit itself (the plan keeps the margin below it); on
         # a grid of at least JERK_MEASURE_HZ, whose limits hold on the table's ticks as well
         worst, speed, where = span_peaks(sp.finer(substeps), spans, v_max / margin, a_max, j_max)
+        keep_best_groups(sp, worst)
         return sp, worst, speed, where
+
+    # each rest-to-rest group's fastest motion measured within the limits so far (the groups are the same in every
+    # attempt where the rests are): the remedies of later rounds serve the groups that still broke a limit
+    seen: dict = {"g_s0": None, "time": None, "at": None, "plans": {}, "count": 0}
+
+    def keep_best_groups(sp: SmoothPlan, worst: np.ndarray) -> None:
+        if seen["g_s0"] is None:
+            seen.update(g_s0=sp.g_s0, time=np.full(sp.g_s0.size, np.inf), at=np.full(sp.g_s0.size, -1))
+        if not np.array_equal(sp.g_s0, seen["g_s0"]):
+            return
+        duration = sp.g_ticks + np.where(sp.g_len > 0, sp.g_window, 0)
+        better = ~group_bad(sp, worst, margin) & (duration < seen["time"])
+        if better.any():
+            seen["count"] += 1
+            seen["time"][better], seen["at"][better] = duration[better], seen["count"]
+            used = set(seen["at"].tolist())
+            seen["plans"] = {k: v for k, v in seen["plans"].items() if k in used} | {seen["count"]: sp}
+
+    def fastest(sp: SmoothPlan) -> SmoothPlan:
+        """``sp`` (within the limits) or, faster, each group's fastest motion measured within them."""
+        at = seen["at"]
+        if at is None or not np.array_equal(sp.g_s0, seen["g_s0"]) or np.any(at < 0):
+            return sp
+        keys = sorted(seen["plans"])
+        spliced = splice_groups([seen["plans"][k] for k in keys], np.searchsorted(keys, at))
+        if spliced.n_ticks >= sp.n_ticks:
+            return sp
+        worst = span_peaks(spliced.finer(substeps), spans, v_max / margin, a_max, j_max)[0]
+        log.debug("jerk stage: groups' fastest motions %.4f s against %.4f s", spliced.total_time_s, sp.total_time_s)
+        return spliced if worst.max() <= margin else sp
 
     def narrowed(sp: SmoothPlan) -> SmoothPlan:
         """``sp`` with each group's window as narrow as the limits allow (:func:`narrow_windows`)."""
@@ -621,7 +685,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             *(it, excess_a, excess_j, int((worst[1] > margin).sum()), alpha, sp.window_ticks, sp.total_time_s),
         )
         if max(excess_a, excess_j) <= margin:
-            return narrowed(sp)
+            return narrowed(fastest(sp))
         if not widening:
             if excess_j < 0.98 * best_j:
                 best_j, stalled = excess_j, 0
@@ -695,7 +759,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             sp, worst, speed, where = attempt(feed, alpha, holds, stretch)
             log.debug("jerk squeeze: v/a %.4f, j %.4f, %.4f s", worst[0].max(), worst[1].max(), sp.total_time_s)
             if worst.max() <= margin:
-                return narrowed(sp)
+                return narrowed(fastest(sp))
     best = None  # fall back: the whole program slower (jerk falls like v³ on curves, v² A on lines)
     for use_holds in (holds, None):
         a_fb, feed_fb, speed_fb = alpha, feed, speed
@@ -708,7 +772,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                     best = sp
                 break
     if best is not None:
-        return narrowed(best)
+        return narrowed(fastest(best))
     raise PlanningError(
         f"{request.machine.source}: no plan keeps the jerk limits j_max = {j_max} mm/s³ "
         "(is j_max tiny against a_max and the tick rate?)"
