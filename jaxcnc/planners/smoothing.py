@@ -68,6 +68,9 @@ SQUEEZE_ROUNDS = 6
 SQUEEZE = 0.7
 #: Plans measured to narrow each group's window once the stage holds the limits (:func:`narrow_windows`).
 NARROW_ROUNDS = 4
+#: Share of a limit the stage's measurements must stay within (the table is sampled from these very positions; the
+#: verifier allows its rounding).
+MEASURE_MARGIN = 1.0 - 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -525,8 +528,7 @@ def narrow_windows(sp: SmoothPlan, floor: int, measure) -> SmoothPlan:
     alone (groups start and end at rest), so one plan measures a trial window for every group at once; a group that
     breaks a limit there keeps a wider one. The windows kept are measured together once more (the finite differences
     across a junction of two groups read both); should anything break, ``sp`` is returned as it was."""
-    base, margin = sp.base, 1.0 - 1e-6
-    group = segment_groups(base)
+    base = sp.base
     n_groups = sp.g_window.size
     good = sp.g_window.copy()  # the narrowest window measured to keep the limits
     fail = np.full(n_groups, floor - 1)  # the widest measured to break one (floor - 1: none yet)
@@ -536,15 +538,14 @@ def narrow_windows(sp: SmoothPlan, floor: int, measure) -> SmoothPlan:
             break
         trial = good.copy()
         trial[open_] = floor if r == 0 else (fail[open_] + good[open_]) // 2  # first W = A/J itself
-        bad_span = measure(smooth(base, trial, sp.span_s0, sp.alpha)).max(axis=0) > margin
-        bad = np.zeros(n_groups, bool)
-        bad[group[bad_span[base.span]]] = True
+        candidate = smooth(base, trial, sp.span_s0, sp.alpha)
+        bad = group_bad(candidate, measure(candidate), MEASURE_MARGIN)
         fail = np.where(open_ & bad, trial, fail)
         good = np.where(open_ & ~bad, trial, good)
     if np.array_equal(good, sp.g_window):
         return sp
     out = smooth(base, good, sp.span_s0, sp.alpha)
-    return out if measure(out).max() <= margin else sp
+    return out if measure(out).max() <= MEASURE_MARGIN else sp
 
 
 def group_bad(sp: SmoothPlan, worst: np.ndarray, margin: float) -> np.ndarray:
@@ -602,7 +603,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     Every measurement is made at ``jerk_substeps(f)`` fine ticks per tick (10 kHz at least): what holds there holds
     on the table's ticks, and a 1 kHz and a 10 kHz table of the same program plan to the same time.
     """
-    margin = 1.0 - 1e-6  # the table is sampled from these very positions; the verifier allows its rounding
+    margin = MEASURE_MARGIN
     f = request.machine.tick_hz
     substeps = jerk_substeps(f)
     spans = request.spans
@@ -623,13 +624,16 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                 f"planner {planner.name!r} returned a {type(base).__name__}; the S-curve stage (j_max is set) "
                 "averages a Plan's trapezoids: return a Plan, or declare handles_jerk = True"
             )
-        window = max(1, math.ceil(float(np.max(base_ratio(alpha))) * stretch * f - 1e-9))
-        sp = smooth(base, window, span_s0, alpha)
-        # a and j are compared with the margin, speeds with the limit itself (the plan keeps the margin below it); on
-        # a grid of at least JERK_MEASURE_HZ, whose limits hold on the table's ticks as well
-        worst, speed, where = span_peaks(sp.finer(substeps), spans, v_max / margin, a_max, j_max)
+        sp = smooth(base, window_ticks(alpha, stretch), span_s0, alpha)
+        worst, speed, where = measured(sp)
         keep_best_groups(sp, worst)
         return sp, worst, speed, where
+
+    def measured(sp: SmoothPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`span_peaks` of ``sp`` on a grid of at least ``JERK_MEASURE_HZ`` (whose limits hold on the table's
+        ticks as well): a and j compared with the margin, speeds with the limit itself (the plan keeps the margin
+        below it)."""
+        return span_peaks(sp.finer(substeps), spans, v_max / margin, a_max, j_max)
 
     # each rest-to-rest group's fastest motion measured within the limits so far (the groups are the same in every
     # attempt where the rests are): the remedies of later rounds serve the groups that still broke a limit
@@ -657,23 +661,22 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
         spliced = splice_groups([seen["plans"][k] for k in keys], np.searchsorted(keys, at))
         if spliced.n_ticks >= sp.n_ticks:
             return sp
-        worst = span_peaks(spliced.finer(substeps), spans, v_max / margin, a_max, j_max)[0]
+        worst = measured(spliced)[0]
         log.debug("jerk stage: groups' fastest motions %.4f s against %.4f s", spliced.total_time_s, sp.total_time_s)
         return spliced if worst.max() <= margin else sp
 
     def narrowed(sp: SmoothPlan) -> SmoothPlan:
         """``sp`` with each group's window as narrow as the limits allow (:func:`narrow_windows`)."""
-        floor = max(1, math.ceil(float(np.max(base_ratio(sp.alpha))) * f - 1e-9))
-        return narrow_windows(
-            sp, floor, lambda c: span_peaks(c.finer(substeps), spans, v_max / margin, a_max, j_max)[0]
-        )
+        return narrow_windows(sp, window_ticks(sp.alpha), lambda c: measured(c)[0])
 
-    def base_ratio(alpha: float) -> np.ndarray:
-        """``(axes,)`` ``A/J`` of the base plan's acceleration (the margin below ``a_max * alpha``): a line's jerk
-        ``A/W`` keeps the margin below ``J`` with ``W`` at its whole ticks (an ``A/J`` of whole ticks is one)."""
+    def window_ticks(alpha: float, stretch: float = 1.0) -> int:
+        """The window: ``stretch`` times ``A/J`` of the base plan's acceleration (the margin below ``a_max * alpha``)
+        over the axes that move, in whole ticks; a line's jerk ``A/W`` keeps the margin below ``J`` (an ``A/J`` of
+        whole ticks is that many ticks)."""
         a = with_margin(a_max * alpha)
         with np.errstate(invalid="ignore"):  # (an axis that never moves has no jerk: its A/J does not count)
-            return np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
+            ratio = np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
+        return max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
 
     alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf
     widen, best_j, stalled = HOLD_WIDEN, np.inf, 0

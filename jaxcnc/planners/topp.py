@@ -601,6 +601,7 @@ class _ProgramFacts:
         n = len(spans)
         nb = bucket_size(n)
         step_hz = step_rate_hz(req)  # a velocity or curvature step is one tick of it wide
+        j_max = jerk_limits(req)
         at_kink, x_junction = _junction_facts(
             _pad_aligned(spans.kind, nb, SpanKind.POINT),
             _pad_aligned(spans.tangent_in, nb, 0.0),
@@ -608,11 +609,10 @@ class _ProgramFacts:
             _pad_aligned(req.stop_before, nb, True),
             np.asarray(req.a_max),
             step_hz,
-            jerk_limits(req),
+            j_max,
         )
         x_junction = np.asarray(x_junction)[: n - 1]
-        if req.j_max is not None and np.any(np.isfinite(req.j_max)):
-            j_max = np.asarray(req.j_max)
+        if j_max is not None:
             x_junction = np.minimum(x_junction, curvature_step_caps(spans, j_max, step_hz))
         zero = np.zeros(1)
         moves = spans.moving_axes & np.isfinite(req.a_max)
