@@ -347,6 +347,25 @@ def test_a_step_of_nanometres_between_two_corners_is_planned_alike_at_any_tick_r
         assert job.exact_corners == 3 and not np.any(job.spans.kind == SpanKind.BLEND)
 
 
+def test_the_search_tries_the_same_windows_at_1_and_10_khz(tmp_path, caplog):
+    """A line into a 3 mm circle, a line, a 0.5 mm circle at 150 mm/s: the S-curve stage widens its window eight
+    times. Its windows are whole milliseconds at any rate (``WINDOW_STEP_S``), so 10 kHz tries the windows 1 kHz
+    tries and takes the same remedies; in steps of a tick, 10 kHz tried 37.5 ms where 1 kHz tried 38 ms, and the
+    peers' plasmatest (J = 1e6) planned 57.88 s at 1 kHz and 58.49 s at 10 kHz (57.83 s now)."""
+    text = "G64 P0.01\nG1 X10 F9000\nG3 X10 Y0 I-3 J0\nG1 X20\nG2 X20 Y0 I-0.5 J0\nM2\n"
+    windows, times = [], []
+    for hz in (1000, 10000):
+        caplog.clear()
+        with caplog.at_level("DEBUG", logger="jaxcnc.planners.smoothing"):
+            job, _, meas = table_of(text, make_machine(tick_hz=hz, v=250, a=3000, rapid=250, j=1e5), tmp_path)
+        assert meas.ok, meas.violations[:3]
+        windows.append([int(w) for w in re.findall(r"jerk stage \d+: .* window (\d+) ticks", caplog.text)])
+        times.append(job.plan.total_time_s)
+    assert abs(times[1] / times[0] - 1) <= 0.01, times
+    assert len(windows[0]) >= 4 and len(set(windows[0])) >= 3  # (the search widened its window several times)
+    assert windows[1] == [10 * w for w in windows[0]]
+
+
 def _planned_alike_at_1_and_10_khz(text: str, tmp_path: Path) -> list:
     """``text`` planned on a laser-cutter-like machine (``J`` = 1e5) at 1 and 10 kHz: each table within every limit
     at every tick, the two planned times within 1 %."""

@@ -71,6 +71,11 @@ NARROW_ROUNDS = 4
 #: Share of a limit the stage's measurements must stay within (the table is sampled from these very positions; the
 #: verifier allows its rounding).
 MEASURE_MARGIN = 1.0 - 1e-6
+#: The search's windows are whole multiples of this (s; at least one tick): the same windows at 1 kHz and at 10 kHz,
+#: so the two rates measure the same motions and take the same remedies (windows of 0.1 ms steps at 10 kHz and 1 ms
+#: at 1 kHz had plasmatest's search part ways at the third widening: 57.88 s against 58.49 s). The valid plan's
+#: windows are then narrowed tick by tick (:func:`narrow_windows`).
+WINDOW_STEP_S = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -601,7 +606,8 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     (:func:`narrow_windows`).
 
     Every measurement is made at ``jerk_substeps(f)`` fine ticks per tick (10 kHz at least): what holds there holds
-    on the table's ticks, and a 1 kHz and a 10 kHz table of the same program plan to the same time.
+    on the table's ticks; and the search's windows are whole multiples of ``WINDOW_STEP_S`` at any rate, so a 1 kHz
+    and a 10 kHz table of the same program take the same path through it and plan to the same time.
     """
     margin = MEASURE_MARGIN
     f = request.machine.tick_hz
@@ -624,7 +630,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                 f"planner {planner.name!r} returned a {type(base).__name__}; the S-curve stage (j_max is set) "
                 "averages a Plan's trapezoids: return a Plan, or declare handles_jerk = True"
             )
-        sp = smooth(base, window_ticks(alpha, stretch), span_s0, alpha)
+        sp = smooth(base, window_ticks(alpha, stretch, step), span_s0, alpha)
         worst, speed, where = measured(sp)
         keep_best_groups(sp, worst)
         return sp, worst, speed, where
@@ -669,14 +675,16 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
         """``sp`` with each group's window as narrow as the limits allow (:func:`narrow_windows`)."""
         return narrow_windows(sp, window_ticks(sp.alpha), lambda c: measured(c)[0])
 
-    def window_ticks(alpha: float, stretch: float = 1.0) -> int:
+    def window_ticks(alpha: float, stretch: float = 1.0, step: int = 1) -> int:
         """The window: ``stretch`` times ``A/J`` of the base plan's acceleration (the margin below ``a_max * alpha``)
-        over the axes that move, in whole ticks; a line's jerk ``A/W`` keeps the margin below ``J`` (an ``A/J`` of
-        whole ticks is that many ticks)."""
+        over the axes that move, in whole multiples of ``step`` ticks; a line's jerk ``A/W`` keeps the margin below
+        ``J`` (an ``A/J`` of whole steps is that many steps)."""
         a = with_margin(a_max * alpha)
         with np.errstate(invalid="ignore"):  # (an axis that never moves has no jerk: its A/J does not count)
             ratio = np.where(np.isfinite(j_max) & np.isfinite(a) & moves, a / (j_max * margin), 0.0)
-        return max(1, math.ceil(float(np.max(ratio)) * stretch * f - 1e-9))
+        return step * max(1, math.ceil(float(np.max(ratio)) * stretch * f / step - 1e-9))
+
+    step = max(1, round(f * WINDOW_STEP_S))  # the search's windows: whole steps (WINDOW_STEP_S)
 
     alpha, holds, stretch, widening, previous_j = 1.0, None, 1.0, True, np.inf
     widen, best_j, stalled = HOLD_WIDEN, np.inf, 0
