@@ -329,6 +329,8 @@ def blend_path(
     radii) are blended as well, so that the path is G2 wherever it may leave the program — what a jerk limit needs
     (at speed ``v`` a curvature step ``ΔK`` is an acceleration step ``ΔK v²``: a jerk of ``ΔK v² f`` at tick rate
     ``f``, which only a lower speed at a higher tick rate keeps within ``J``)."""
+    if corner_tol_mm <= 0 and not np.any((program.blend_tol > 0) & np.isfinite(program.blend_tol)):
+        return spans  # exact corners throughout (no G64 P > 0; G64 without P means the machine's 0): nothing to blend
     tol = junction_tolerances(program, spans, corner_tol_mm, exact_before)
     t1, t2 = spans.tangent_out[:-1], spans.tangent_in[1:]
     turn = np.arccos(np.clip(np.sum(t1 * t2, axis=1), -1.0, 1.0)) if len(spans) > 1 else np.zeros(0)
