@@ -396,16 +396,12 @@ def _junction_program():
 
 
 @cached_jit
-def _align(prof: dict, rest_start: jnp.ndarray, tick_hz) -> dict:
-    """:func:`~jaxcnc.planners.timelaw.align_to_ticks`, returning only what it adds to the segments."""
-    out = align_to_ticks(prof, rest_start, tick_hz)
-    return {k: out[k] for k in _ALIGN_KEYS}
-
-
-@cached_jit
 def _align_total(duration: jnp.ndarray, rest_start: jnp.ndarray, tick_hz) -> dict:
-    """:func:`_align` of segments given by their whole durations ``(m,)`` (``t_acc + t_cru + t_dec``, summed as the
-    alignment sums them: the same ticks and offsets, bit for bit)."""
+    """:func:`~jaxcnc.planners.timelaw.align_to_ticks` of segments given by their whole durations ``(m,)``
+    (``t_acc + t_cru + t_dec``, summed on the host as the alignment sums them), returning only what it adds to the
+    segments. Every plan of the grid is aligned by this one program, whether it keeps its trapezoids' columns or
+    their ramps: the same inputs give the same bits on any CPU (two programs, one summing the times itself, differed
+    in the last bit of some offsets on a machine whose XLA:CPU contracted the sums into its scan differently)."""
     zero = jnp.zeros_like(duration)
     out = align_to_ticks({"t_acc": duration, "t_cru": zero, "t_dec": zero}, rest_start, tick_hz)
     return {k: out[k] for k in _ALIGN_KEYS}
@@ -992,7 +988,7 @@ def _plain_inputs(window: dict, iv: dict, frames, holds, scalars):
 TRIM_SEGMENTS = 1 << 20
 
 #: Buckets whose tick alignment this process has compiled (see :meth:`_SegmentTable.prepare`).
-_ALIGN_COMPILED: set[tuple[int, bool]] = set()
+_ALIGN_COMPILED: set[int] = set()
 
 
 class _SegmentTable:
@@ -1057,13 +1053,9 @@ class _SegmentTable:
         is in use: compiled at the end, the compiler's working memory would sit on top of the whole plan's.
         Once per bucket and process (a run on zeros, discarded)."""
         mb = len(self)
-        if (mb, self.ramps) not in _ALIGN_COMPILED:
-            zero = np.zeros(mb)
-            if self.ramps:
-                _align_total(zero, np.ones(mb, bool), tick_hz)
-            else:
-                _align({"t_acc": zero, "t_cru": zero, "t_dec": zero}, np.ones(mb, bool), tick_hz)
-            _ALIGN_COMPILED.add((mb, self.ramps))
+        if mb not in _ALIGN_COMPILED:
+            _align_total(np.zeros(mb), np.ones(mb, bool), tick_hz)
+            _ALIGN_COMPILED.add(mb)
 
     def _reserve(self, rows: int) -> None:
         have = len(self)
@@ -1198,12 +1190,10 @@ class _SegmentTable:
         for k in ("duration",) if self.ramps else ("t_acc", "t_cru", "t_dec"):
             cols[k][n:mb] = self._FILL[k]
         cols["rest"][n:mb] = True
-        if self.ramps:
-            out = jax.device_get(_align_total(cols["duration"][:mb], cols["rest"][:mb], tick_hz))
-        else:
-            times = {k: cols[k][:mb] for k in ("t_acc", "t_cru", "t_dec")}
-            out = jax.device_get(_align(times, cols["rest"][:mb], tick_hz))
-            del times
+        # the durations as Ramps.classify sums them (t_acc + t_cru + t_dec, left to right)
+        duration = cols["duration"][:mb] if self.ramps else cols["t_acc"][:mb] + cols["t_cru"][:mb] + cols["t_dec"][:mb]
+        out = jax.device_get(_align_total(duration, cols["rest"][:mb], tick_hz))
+        del duration
         first_segment = np.flatnonzero(cols["rest"][:n])
         groups = GroupTicks(first_segment, np.array(out.pop("g_start")[: first_segment.size]))  # (not a view of mb)
         columns = {"offset_ticks": np.asarray(out["offset_ticks"][:n])}
