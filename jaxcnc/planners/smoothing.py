@@ -109,7 +109,12 @@ class SmoothPlan(TimeLaw):
 
     @property
     def n_ticks(self) -> int:
-        return self.base.n_ticks + int(np.sum(self.g_window[self.g_len > 0]))
+        return self.base.n_ticks + int(np.sum(self.g_growth))
+
+    @property
+    def g_growth(self) -> np.ndarray:
+        """``(n_groups,)`` ticks each group lasts longer than in the base plan (:func:`group_growth`)."""
+        return group_growth(self.g_len, self.g_window)
 
     @property
     def window_ticks(self) -> int:
@@ -261,6 +266,12 @@ def _segment_integral_np(plan: Plan) -> np.ndarray:
     return np.asarray(_segment_integral_jit(arrays, np.arange(len(plan)), plan.duration_s))
 
 
+def group_growth(g_len: np.ndarray, g_window: np.ndarray) -> np.ndarray:
+    """``(n_groups,)`` ticks the averaging adds to each group: its window where it moves (dwells and events keep
+    their ticks)."""
+    return np.where(g_len > 0, g_window, 0)
+
+
 def segment_groups(plan: Plan) -> np.ndarray:
     """``(n_segments,)`` the rest-to-rest group of each segment of ``plan`` (0, 1, … in order)."""
     group_tick = plan.group_tick
@@ -283,7 +294,7 @@ def smooth(plan: Plan, window_ticks: int | np.ndarray, span_s0: np.ndarray, alph
     csum = np.cumsum(whole)
     seg_prefix = csum - whole - (csum - whole)[starts][group]  # exclusive sum within the group
     g_window = np.broadcast_to(np.asarray(window_ticks, np.int64), starts.shape).copy()
-    grow = np.where(g_len > 0, g_window, 0)  # groups that move grow by their window; dwells and events do not
+    grow = group_growth(g_len, g_window)
     g_new_start = g_start + (np.cumsum(grow) - grow)
     return SmoothPlan(
         base=plan,
@@ -650,7 +661,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             seen.update(g_s0=sp.g_s0, time=np.full(sp.g_s0.size, np.inf), at=np.full(sp.g_s0.size, -1))
         if not np.array_equal(sp.g_s0, seen["g_s0"]):
             return
-        duration = sp.g_ticks + np.where(sp.g_len > 0, sp.g_window, 0)
+        duration = sp.g_ticks + sp.g_growth
         better = ~group_bad(sp, worst, margin) & (duration < seen["time"])
         if better.any():
             seen["count"] += 1

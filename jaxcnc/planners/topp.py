@@ -860,14 +860,13 @@ def _plain_window(
     if req.hold_caps is not None and len(req.hold_caps):
         hold_a, hold_b = node_holds(req, grid)
         holds = (_pad_aligned(hold_a, mb, np.inf), _pad_aligned(hold_b, mb, np.inf))
-    j_max = req.j_max
     limits = (
         np.asarray(req.v_max),
         np.asarray(req.a_max),
         req.machine.path.chord_tol_mm,
         req.machine.tick_hz,
     )
-    j_max = np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None
+    j_max = jerk_limits(req)
     g = _plain_inputs(window, iv, frames, holds, np.array([m, x_start]))
     caps = _caps(g, limits[0], *limits[2:], j_max)
     if frames is None:
@@ -1302,7 +1301,6 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
     )
     hold_a, hold_b = node_holds(req, grid)
     g["hold_a"], g["hold_b"] = _pad_aligned(hold_a, mb, np.inf), _pad_aligned(hold_b, mb, np.inf)
-    j_max = req.j_max
     out = plan_grid(
         g,
         np.asarray(req.v_max),
@@ -1313,7 +1311,7 @@ def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: flo
         curved_any=bool(grid.curved.any()),
         boxed_any=bool(grid.boxed.any()),
         axes=facts.axes,
-        j_max=np.asarray(j_max) if j_max is not None and np.any(np.isfinite(j_max)) else None,
+        j_max=jerk_limits(req),
     )
     return {k: np.asarray(v) for k, v in jax.device_get(out).items()}
 
