@@ -84,7 +84,14 @@ class GCodeFrontEnd(FrontEnd):
         self.refuse_options(path, options)
         start = program_start(machine)
         external = machine.galvo is not None and machine.galvo.stage  # M170/M171: stage + galvo (docs/scanner.md)
-        return load_gcode(path, start=start, home=start, dialect=options.get("dialect"), external=external)
+        return load_gcode(
+            path,
+            start=start,
+            home=start,
+            dialect=options.get("dialect"),
+            external=external,
+            tools=machine.tool_offsets(),
+        )
 
 
 class PointFileFrontEnd(FrontEnd):

@@ -147,6 +147,20 @@ class GalvoConfig:
 
 
 @dataclass(frozen=True)
+class ToolConfig:
+    """One row of the tool table (``[tools.N]``): the offsets ``G43 H<N>`` applies.
+
+    ``z_mm`` is the tool length offset (a nozzle or lens of another focal length): with it in effect, a programmed
+    ``Z`` is reached at machine ``Z + z_mm``; ``x_mm``, ``y_mm`` shift the controlled point likewise (a second head).
+    """
+
+    number: int
+    z_mm: float
+    x_mm: float = 0.0
+    y_mm: float = 0.0
+
+
+@dataclass(frozen=True)
 class MachineConfig:
     """A validated, immutable machine description."""
 
@@ -163,6 +177,12 @@ class MachineConfig:
     planner: str | None = None
     #: ``[galvo]``: a scanner-only machine whose x, y are the beam, with its scan-head model (docs/scanner.md).
     galvo: GalvoConfig | None = None
+    #: ``[tools.N]``: the tool table, by tool number (what ``G43 H<N>`` applies), in ascending order.
+    tools: tuple[ToolConfig, ...] = ()
+
+    def tool_offsets(self) -> dict[int, tuple[float, float, float]]:
+        """The tool table as ``{number: (x_mm, y_mm, z_mm)}``, what :func:`~jaxcnc.gcode.parse_gcode` reads."""
+        return {t.number: (t.x_mm, t.y_mm, t.z_mm) for t in self.tools}
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -358,6 +378,11 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "rotation_deg": ("number", False, 0.0, _finite),
         "offset_mm": ("number_list", False, (0.0, 0.0), None),
     },
+    "tool": {
+        "z_mm": ("number", True, None, _finite),
+        "x_mm": ("number", False, 0.0, _finite),
+        "y_mm": ("number", False, 0.0, _finite),
+    },
     "galvo": {
         "tracking_error_s": ("number", True, None, _tracking_error),
         "mirror_a_max_mm_s2": ("number", True, None, _mirror_accel),
@@ -375,7 +400,7 @@ _SCHEMA: dict[str, dict[str, tuple[str, bool, Any, Check]]] = {
         "sky_limit_deg": ("number", False, None, _sky_limit),
     },
 }
-_TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner", "galvo")
+_TOP_LEVEL = ("machine", "axes", "path", "laser", "scanner", "galvo", "tools")
 #: Axes a galvo board drives: the beam at the field (x, y) and a focus shifter (z).
 GALVO_AXES = ("x", "y", "z")
 
@@ -585,6 +610,7 @@ class _Loader:
                     "the model cannot resolve it",
                 )  # fmt: skip
             galvo = GalvoConfig(**g)
+        tools = self.tools(doc.get("tools", {}))
         return MachineConfig(
             name=m["name"],
             tick_hz=m["tick_hz"],
@@ -596,7 +622,22 @@ class _Loader:
             source=self.file,
             planner=m["planner"],
             galvo=galvo,
+            tools=tools,
         )
+
+    def tools(self, raw: Any) -> tuple[ToolConfig, ...]:
+        """``[tools.N]`` tables: ``N`` a tool number 1..99999 (``H`` words name them; 0 is "no tool")."""
+        if not isinstance(raw, Mapping):
+            raise self.fail("tools", None, "must be a table of tool tables such as [tools.1]")
+        out = []
+        for key, row in raw.items():
+            if not re.fullmatch(r"[0-9]{1,5}", key) or int(key) == 0:
+                raise self.fail(
+                    f"tools.{key}", None, f"{key!r} is not a tool number: tools are [tools.1] to [tools.99999] "
+                    "(the number G43 H names; H0 means no offset)",
+                )  # fmt: skip
+            out.append(ToolConfig(number=int(key), **self.section(f"tools.{key}", row, "tool")))
+        return tuple(sorted(out, key=lambda t: t.number))
 
 
 def parse_machine(text: str, file: str = "<string>") -> MachineConfig:

@@ -133,7 +133,7 @@ def test_start_position_and_g40_g17_g94():
         ("G1 X1.2.3 F60", 1, 4, "malformed number"),
         ("G1 X--1 F60", 1, 4, "malformed number"),
         ("G1 X", 1, 4, "has no number"),
-        ("\nG43 H1", 2, 5, "no tool table"),
+        ("\nG43 H1", 2, 5, "has no [tools] table"),
         ("G41 D1", 1, 1, "cutter compensation G41 is not supported yet"),
         ("M62 P1", 1, 1, "M62"),
         ("G1 A10 F60", 1, 4, "unsupported word A10"),

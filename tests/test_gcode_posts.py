@@ -279,12 +279,106 @@ def test_arc_without_end_point_words_is_a_full_circle():
 # ---- G43 -------------------------------------------------------------------------------------------
 
 
-def test_g43_needs_a_tool_table_except_for_no_offset():
+TOOLS = {1: (0.0, 0.0, 12.5), 2: (1.5, -2.0, -3.0)}
+
+
+def test_g43_needs_the_tool_in_the_table_except_for_no_offset():
     e = err("T1 M6\nG43 Z15. H1\n")
-    assert (e.line, e.column) == (2, 10) and "no tool table is configured" in e.reason
+    assert (e.line, e.column) == (2, 10) and "the machine file has no [tools] table" in e.reason
     e = err("T1 M6\nG43 Z15.\n")
     assert (e.line, e.column) == (2, 1) and "loaded tool T1" in e.reason
     assert len(parse("T1\nG43 G0 Z15.\nG43 H0\nG49\n")) == 1  # T1 selected, not loaded: no offset
+    with pytest.raises(SourceError) as info:
+        parse("G0 X1\nG43 Z15. H3\n", tools=TOOLS)
+    assert (info.value.line, info.value.column) == (2, 10)
+    assert "tool 3 has no offsets (the machine file's [tools] has 1, 2" in info.value.reason
+    with pytest.raises(SourceError, match="a tool number is a non-negative integer"):
+        parse("G43 H1.5\n", tools=TOOLS)
+
+
+def test_g43_h_applies_the_tool_length_offset_as_linuxcnc():
+    """LinuxCNC's meaning: a programmed Z is reached at machine Z + the tool's offset; the offset moves nothing
+    itself (an axis not named stays where it is), absolute coordinates take it, incremental ones go on from where
+    the axis is; G49 (and H0) cancel it; G92 reads the position under it."""
+    p = parse(
+        "G21 G90 G0 X1 Y2 Z3\n"  # start
+        "T1 M6\n"
+        "G43 Z15. H1\n"  # Fusion's form: the offset and a move in the motion mode in effect
+        "X4\n"  # Z not named: stays at 27.5
+        "G91 Z1\n"  # incremental: 28.5
+        "G90 G1 Z0 F600\n"  # the part's top: machine 12.5
+        "G49 G0 Z10\n"  # cancelled: machine 10
+        "G43 G0 X0\n"  # without H: the loaded tool T1; Z not named stays at 10
+        "Z0\n"  # 12.5
+        "G43 H0 G0 Z0\n"  # no offset
+        "M2\n",
+        tools=TOOLS,
+    )
+    np.testing.assert_allclose(
+        p.end[[0, 2, 3, 4, 5, 6, 7, 8, 9]],
+        [[1, 2, 3], [1, 2, 27.5], [4, 2, 27.5], [4, 2, 28.5], [4, 2, 12.5], [4, 2, 10], [0, 2, 10], [0, 2, 12.5],
+         [0, 2, 0]],
+    )  # fmt: skip
+    assert p.event[1] == Event.TOOL_CHANGE
+    q = parse("G0 X0 Y0 Z0\nG43 H1\nG92 Z0\nG0 Z1\nG49\nZ1\n", tools=TOOLS)  # G92 under the offset
+    np.testing.assert_allclose(q.end[-2:, 2], [1.0, 1.0 - 12.5])
+    arc = parse("G0 X0 Y0 Z0\nG43.2 H2\nX0 Y0\nG90.1 G2 X10 Y0 I5 J0 F600\n", tools=TOOLS)  # absolute centres too
+    np.testing.assert_allclose(arc.end[-1], [11.5, -2.0, 0.0])
+    np.testing.assert_allclose(arc.center[-1][:2], [6.5, -2.0])
+
+
+def test_g43_1_and_g43_2_set_and_add_offsets():
+    p = parse(
+        "G20 G0 X0 Y0 Z0\n"  # inches: the axis words of G43.1 are program units
+        "G43.1 Z0.5\nZ0\n"  # 12.7 mm
+        "G43.2 Z0.1\nZ0\n"  # + 2.54
+        "G43.2 H1\nZ0\n"  # + 12.5 mm from the table
+        "G43.1 X1\nZ0 X0\n"  # X replaced, Z kept
+        "G49\nZ0\n",
+        tools=TOOLS,
+    )
+    np.testing.assert_allclose(
+        p.end[1:], [[0, 0, 12.7], [0, 0, 15.24], [0, 0, 27.74], [25.4, 0, 27.74], [25.4, 0, 0]], atol=1e-12
+    )
+    for text, col, needle in [
+        ("G43.1 H1\n", 7, "G43.1 takes axis words, not H"),
+        ("G43.1\n", 1, "G43.1 needs axis words"),
+        ("G43.2\n", 1, "G43.2 adds the offsets of a tool (H) or those given as axis words"),
+        ("G0 G43.1 Z1\n", 4, "G43.1 and a motion G code in one block both claim the axis words"),
+        ("G43 G43.1 Z1\n", 5, "modal group"),
+    ]:
+        with pytest.raises(SourceError) as info:
+            parse(text, tools=TOOLS)
+        assert info.value.column == col and needle in info.value.reason, (text, info.value)
+
+
+def test_a_machine_file_tool_table_reaches_the_program(tmp_path):
+    from jaxcnc.front_ends import FRONT_ENDS
+    from jaxcnc.machine import MachineFileError, parse_machine
+
+    base = (
+        '[machine]\ntick_hz = 1000\n[axes.x]\nv_max = 100\na_max = 1000\nmin = -100\nmax = 100\n'
+        '[axes.y]\nv_max = 100\na_max = 1000\nmin = -100\nmax = 100\n'
+        '[axes.z]\nv_max = 100\na_max = 1000\nmin = -100\nmax = 100\n'
+        '[path]\nfeed = 10\nrapid = 50\n'
+    )  # fmt: skip
+    m = parse_machine(base + "[tools.2]\nz_mm = -3.0\nx_mm = 1.5\n[tools.1]\nz_mm = 12.5\n", "m.toml")
+    assert m.tool_offsets() == {1: (0.0, 0.0, 12.5), 2: (1.5, 0.0, -3.0)}
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G0 X0 Y0 Z0\nG43 H2 Z1\nM2\n")
+    p = FRONT_ENDS.get("ngc").load(prog, m)
+    np.testing.assert_allclose(p.end[-1], [0.0, 0.0, -2.0])  # X not named: no move on X
+    for extra, needle in [
+        ("[tools.0]\nz_mm = 1\n", "'0' is not a tool number"),
+        ("[tools.T1]\nz_mm = 1\n", "'T1' is not a tool number"),
+        ("[tools.1]\nx_mm = 1\n", "missing required key 'z_mm'"),
+        ("[tools.1]\nz_mm = 1\nd_mm = 3\n", "unknown key 'd_mm'"),
+        ("[tools.1]\nz_mm = inf\n", "tools.1.z_mm"),
+        ("tools = 3\n", "must be a table of tool tables"),
+    ]:
+        text = (extra + base) if extra.startswith("tools =") else base + extra
+        with pytest.raises(MachineFileError, match=needle.replace("[", r"\[").replace(".", r"\.")):
+            parse_machine(text, "m.toml")
 
 
 # ---- refusals with their reasons --------------------------------------------------------------------
@@ -302,7 +396,6 @@ def test_g43_needs_a_tool_table_except_for_no_offset():
         ("G38.2 Z-10 F100", 1, "probing needs a probe input"),
         ("G41.1 D0.5", 1, "cutter compensation G41.1 is not supported yet"),
         ("G42 D1", 1, "cutter compensation G42 is not supported yet"),
-        ("G43.1 Z0.5", 1, "dynamic tool length offset"),
         ("G7", 1, "lathe diameter mode"),
         ("G17.1", 1, "U V W axes"),
         ("G28.1", 1, "home="),

@@ -6,13 +6,13 @@ turns every supported word into its proper meaning and refuses everything else w
 :class:`~jaxcnc.errors.SourceError` naming ``file:line:column`` and the word — nothing is
 silently ignored.
 
-Supported here: G0 G1 G2 G3 (arcs in the G17/G18/G19 planes in IJK or R form, full circles,
-helices, P turns), G4, G5 G5.1 G5.2/G5.3 G6.2 splines, G8, G10 L2 (zero values), G17 G18 G19,
-G20 G21, G28, G40, G43 H0 / G49, G53, G54–G59.3, G61 G61.1 G64 (P, Q), G80, G90 G91, G90.1 G91.1,
-G92 G92.1 G92.2 G92.3, G94, G97, G98 G99, F, S, T, M0 M1 M2 M30, M3 M4 M5, M6, M7 M8 M9, N, block
-delete, comments, ``%`` delimiters, and through the preprocessor parameters, expressions and O-word
-control flow. Codes that name something jaxcnc cannot honour (canned cycles, spindle-synchronized
-motion, probing, tool tables, rotary axes, ...) are refused with the reason.
+Supported here: G0 G1 G2 G3 (arcs in the G17/G18/G19 planes in IJK or R form, full circles, helices, P turns), G4,
+G5 G5.1 G5.2/G5.3 G6.2 splines, G8, G10 L2 (zero values), G17 G18 G19, G20 G21, G28, G40, G43 G43.1 G43.2 G49 (tool
+offsets from the machine file's ``[tools]``), G53, G54–G59.3, G61 G61.1 G64 (P, Q), G80, G90 G91, G90.1 G91.1, G92
+G92.1 G92.2 G92.3, G94, G97, G98 G99, F, S, T, M0 M1 M2 M30, M3 M4 M5, M6, M7 M8 M9, N, block delete, comments,
+``%`` delimiters, and through the preprocessor parameters, expressions and O-word control flow. Codes that name
+something jaxcnc cannot honour (canned cycles, spindle-synchronized motion, probing, writing the tool table, rotary
+axes, ...) are refused with the reason.
 
 Runs of plain motion blocks go through :mod:`jaxcnc.gcode.fastpath` in bulk, to the same result.
 """
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -93,6 +94,8 @@ _G_GROUP = {
     923: 0,
     530: 0,
     430: 8,
+    431: 8,
+    432: 8,
     490: 8,
     540: 12,
     550: 12,
@@ -138,8 +141,6 @@ _REFUSED_G = {
     411: "cutter compensation G41.1 is not supported yet",
     420: "cutter compensation G42 is not supported yet",
     421: "cutter compensation G42.1 is not supported yet",
-    431: "G43.1 dynamic tool length offset: no tool table is configured (only G43 H0 and G49)",
-    432: "G43.2 tool length offset: no tool table is configured (only G43 H0 and G49)",
     500: f"G50 (scaling off on Fanuc mills, a spindle limit on lathes) {_FANUC}",
     510: f"G51 (scaling on Fanuc mills) {_FANUC}",
     520: "G52 local coordinate offsets are not supported (G92 is)",
@@ -238,6 +239,7 @@ class _State:
     arc_absolute: bool = False  # G90.1: I J K are absolute centre coordinates
     g92: np.ndarray = field(default_factory=lambda: np.zeros(3))  # G92 offset (mm)
     g92_saved: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tool_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))  # G43 / G43.1 / G43.2 (mm), G49 zeroes it
     g5_last_pq: np.ndarray | None = None  # P, Q of the previous G5 (for tangent continuation)
     g80_line: int | None = None  # the G80 that left no motion mode (for error messages)
     nurbs: NurbsBlock | None = None  # a G5.2 / G6.2 curve being read
@@ -331,9 +333,16 @@ class _Block:
 
 class _Interpreter:
     def __init__(
-        self, file: str, start: np.ndarray, home: np.ndarray, dialect: Dialect = LINUXCNC, external: bool = False
+        self,
+        file: str,
+        start: np.ndarray,
+        home: np.ndarray,
+        dialect: Dialect = LINUXCNC,
+        external: bool = False,
+        tools: Mapping[int, Sequence[float]] | None = None,
     ):
         self.file, self.dialect = file, dialect
+        self.tools = {int(k): np.asarray(v, dtype=np.float64) for k, v in (tools or {}).items()}
         self.external = external  # M170/M171 have a meaning: the machine has a stage and a galvo head
         self.external_at: tuple[np.ndarray, int] | None = None  # the stage's position and the M170 line, inside
         self.address = {meaning: name for name, meaning in dialect.addresses.items()}
@@ -451,19 +460,11 @@ class _Interpreter:
                 if w is not None and w.value < 0:
                     raise b.error(w, f"negative tolerance {w.letter}{w.text}")
             s.blend_tol = p.value * s.scale if p is not None else math.inf
-        # tool length offset: there is no tool table, so only "no offset" has a meaning
+        # tool offsets (G43 H, G43.2 H; G43.1 and G43.2 with axis words take them below, with the axis words)
         if (g43 := b.has_g(430)) is not None:
-            h = b.take("H")
-            if h is not None and h.value != 0:
-                raise b.error(
-                    h, f"tool length offset H{h.text}: no tool table is configured (only H0, or G49: no offset)"
-                )
-            if h is None and s.loaded_tool != 0:
-                raise b.error(
-                    g43,
-                    f"G43 without H takes the offset of the loaded tool T{s.loaded_tool}: no tool table is "
-                    "configured (only H0, or G49: no offset)",
-                )
+            s.tool_offset = self.tool_row(b, b.take("H"), g43)
+        if b.has_g(490) is not None:
+            s.tool_offset = np.zeros(3)
         # arc centre mode
         if b.has_g(901) is not None:
             s.arc_absolute = True
@@ -499,17 +500,21 @@ class _Interpreter:
         axes = b.axis_words()
         for letter in _AXES:
             b.take(letter)
-        # G10 and G92 take the block's axis words for themselves (neither moves); then the M words
+        # G10, G92, G43.1 and G43.2 take the block's axis words for themselves (none moves); then the M words
         # below still act ("G92 X0 M2")
         if (g10 := b.has_g(100)) is not None:
             self.g10(b, g10, axes, motion_word)
+        elif (g431 := b.has_g(431)) is not None:
+            self.g43_axes(b, g431, axes, motion_word, dynamic=True)
+        elif (g432 := b.has_g(432)) is not None:
+            self.g43_axes(b, g432, axes, motion_word, dynamic=False)
         elif (g92 := b.has_g(920)) is not None:
             if not axes:
                 raise b.error(g92, "G92 needs axis words")
             if motion_word is not None:
                 raise b.error(g92, "G92 and a motion G code in one block both claim the axis words")
-            for k, w in axes.items():  # the current position now reads as the given value
-                s.g92[k] = s.pos[k] - w.value * s.scale
+            for k, w in axes.items():  # the current position now reads as the given value (under the tool offset)
+                s.g92[k] = s.pos[k] - w.value * s.scale - s.tool_offset[k]
         else:
             self.move(b, axes, motion_word)
         # stops and end
@@ -591,8 +596,49 @@ class _Interpreter:
 
     @property
     def offset(self) -> np.ndarray:
-        """Program → machine coordinates: the G92 offset (work offsets G54–G59.3 are zero)."""
-        return self.s.g92
+        """Program → machine coordinates: the G92 offset plus the tool offset (work offsets G54–G59.3 are zero).
+
+        As in LinuxCNC, a new tool offset moves nothing by itself: the position reads differently, the next
+        absolute coordinate of an axis is reached at its new machine position, an incremental one from where the
+        axis is."""
+        return self.s.g92 + self.s.tool_offset
+
+    def tool_row(self, b: _Block, h: Word | None, g: Word) -> np.ndarray:
+        """The tool table's offsets ``(3,)`` (mm) of tool ``H`` (without ``H``: the tool M6 loaded; 0: none)."""
+        if h is not None and (h.value != int(h.value) or h.value < 0):
+            raise b.error(h, f"H{h.text}: a tool number is a non-negative integer")
+        number = int(h.value) if h is not None else self.s.loaded_tool
+        if number == 0:
+            return np.zeros(3)
+        if number not in self.tools:
+            word = h if h is not None else g
+            what = f"H{h.text}" if h is not None else f"G{g.text} without H (the loaded tool T{number})"
+            have = ", ".join(str(k) for k in sorted(self.tools)[:8]) + ("..." if len(self.tools) > 8 else "")
+            where = f"the machine file's [tools] has {have}" if self.tools else "the machine file has no [tools] table"
+            raise b.error(word, f"{what}: tool {number} has no offsets ({where}; H0 or G49: no offset)")
+        return self.tools[number].copy()
+
+    def g43_axes(self, b: _Block, g: Word, axes: dict[int, Word], motion_word: Word | None, dynamic: bool) -> None:
+        """G43.1 (the axis words are the tool offsets, in program units) and G43.2 (adds tool ``H``'s offsets, or
+        the axis words, to those in effect), as LinuxCNC 2.9."""
+        s = self.s
+        if motion_word is not None and axes:
+            raise b.error(g, f"G{g.text} and a motion G code in one block both claim the axis words")
+        h = b.take("H")
+        if dynamic:
+            if h is not None:
+                raise b.error(h, "G43.1 takes axis words, not H (G43 H applies the tool table)")
+            if not axes:
+                raise b.error(g, "G43.1 needs axis words: the tool offsets (e.g. G43.1 Z2.5)")
+            for k, w in axes.items():
+                s.tool_offset[k] = w.value * s.scale
+            return
+        if h is None and not axes:
+            raise b.error(g, "G43.2 adds the offsets of a tool (H) or those given as axis words: it needs one")
+        if h is not None:
+            s.tool_offset = s.tool_offset + self.tool_row(b, h, g)
+        for k, w in axes.items():
+            s.tool_offset[k] += w.value * s.scale
 
     def g10(self, b: _Block, g10: Word, axes: dict[int, Word], motion_word: Word | None) -> None:
         """G10 L2: set a coordinate system's offsets and rotation — only to the zero they have.
@@ -608,7 +654,9 @@ class _Interpreter:
         if l_word is None:
             raise b.error(g10, "G10 needs L (L2: coordinate system offsets)")
         if l_word.value in (1, 10, 11):
-            raise b.error(l_word, f"G10 L{l_word.text} writes the tool table; jaxcnc has none")
+            raise b.error(
+                l_word, f"G10 L{l_word.text} writes the tool table, which is the machine file's [tools] (read-only)"
+            )
         if l_word.value == 20:
             raise b.error(l_word, "G10 L20 sets a work offset from the current point; work offsets are not supported")
         if l_word.value != 2:
@@ -1080,6 +1128,7 @@ def parse_gcode(
     dialect: str | Dialect | None = None,
     fast: bool = True,
     external: bool = False,
+    tools: Mapping[int, Sequence[float]] | None = None,
 ) -> Program:
     """Interpret G-code ``text`` into a Program.
 
@@ -1100,13 +1149,16 @@ def parse_gcode(
             :class:`~jaxcnc.gcode.dialect.Dialect`.
         fast: use the bulk path for plain blocks (``False``: every block line by line, the reference).
         external: M170 / M171 switch motion to a galvo scanner and back (a stage + galvo machine); else errors.
+        tools: the tool table, ``{number: (x_mm, y_mm, z_mm)}`` (a machine file's
+            :meth:`~jaxcnc.machine.MachineConfig.tool_offsets`): the offsets ``G43 H<number>`` and ``G43.2`` apply.
+            Without it only ``H0`` (no offset), ``G43.1`` and ``G49`` have a meaning.
 
     Raises:
         SourceError: naming ``file:line:column``, the word and the reason.
     """
     dia = load_dialect(dialect)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
-    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia, external)
+    it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia, external, tools)
     open_percent: list[int] = []  # the line of a '%' that opens the program when no second '%' closes it
     if _needs_preprocessor(text):
         expanded = expand(text, file, max_depth=max_depth, max_lines=max_lines, dialect=dia, percent=open_percent)
