@@ -322,6 +322,8 @@ def test_g43_h_applies_the_tool_length_offset_as_linuxcnc():
     assert p.event[1] == Event.TOOL_CHANGE
     q = parse("G0 X0 Y0 Z0\nG43 H1\nG92 Z0\nG0 Z1\nG49\nZ1\n", tools=TOOLS)  # G92 under the offset
     np.testing.assert_allclose(q.end[-2:, 2], [1.0, 1.0 - 12.5])
+    g53 = parse("G0 X0 Y0 Z0\nG43 H1\nG53 G0 Z0\nG28\nG28 Z5\n", tools=TOOLS, home=(0.0, 0.0, 50.0))
+    np.testing.assert_allclose(g53.end[1:, 2], [0.0, 50.0, 17.5, 50.0])  # machine positions; G28's via point shifted
     arc = parse("G0 X0 Y0 Z0\nG43.2 H2\nX0 Y0\nG90.1 G2 X10 Y0 I5 J0 F600\n", tools=TOOLS)  # absolute centres too
     np.testing.assert_allclose(arc.end[-1], [11.5, -2.0, 0.0])
     np.testing.assert_allclose(arc.center[-1][:2], [6.5, -2.0])
