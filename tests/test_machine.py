@@ -153,3 +153,17 @@ def test_cli_reports_machine_mistake_without_traceback(tmp_path):
     assert "Traceback" not in r.stderr
     assert f"{bad}:" in r.stderr and "[axes.x.a_max]" in r.stderr
     assert not (tmp_path / "o.ticks").exists()
+
+
+def test_tool_table_mistakes_name_their_line():
+    text = machine_text() + "\n[tools.1]\nz_mm = 12.5\n\n[tools.7]\nz_mm = 1.0\nlength = 3\n"
+    e = _err(text)
+    assert (e.key, e.line) == ("tools.7.length", _line_of(text, "length = 3")) and "unknown key 'length'" in e.reason
+    text = machine_text() + "\n[tools.0]\nz_mm = 1.0\n"
+    e = _err(text)
+    assert (e.key, e.line) == ("tools.0", _line_of(text, "[tools.0]")) and "H0 means no offset" in e.reason
+    text = machine_text() + '\n[tools.2]\nz_mm = "long"\n'
+    e = _err(text)
+    assert (e.key, e.line) == ("tools.2.z_mm", _line_of(text, 'z_mm = "long"')) and "expected a number" in e.reason
+    m = parse_machine(machine_text() + "\n[tools.12]\nz_mm = -2.0\ny_mm = 0.5\n")
+    assert m.tool_offsets() == {12: (0.0, 0.5, -2.0)} and parse_machine(machine_text()).tool_offsets() == {}
