@@ -437,3 +437,13 @@ def test_refusals_are_the_same_in_every_dialect():
         with pytest.raises(SourceError, match="canned cycles are not supported"):
             parse_gcode("G81 X1 Y1 Z-1 R1 F100\n", dialect=dialect)
         assert math.isnan(parse_gcode("G80 G0 X1\n", dialect=dialect).feed[0])
+
+
+def test_tool_offsets_reach_the_bulk_path_as_the_line_by_line_one():
+    body = "".join(f"G1 X{i * 0.1:.3f} Y{(i % 7) * 0.05:.3f} Z{(i % 3) * 0.01:.3f} F600\n" for i in range(200))
+    inc = "".join(f"G1 X0.1 Y{(-1) ** i * 0.05:.3f}\n" for i in range(100))
+    arcs = "".join(f"G2 X{i * 0.1 + 0.1:.3f} Y0 I0.05 J0\n" for i in range(200, 260))
+    text = f"G0 X0 Y0 Z0\nT1 M6\nG43 H2\n{body}G91\n{inc}G90 G43.1 Z2\nG0 X20 Y0\n{arcs}G49\n{body}M2\n"
+    fast, slow = parse(text, tools=TOOLS), parse(text, tools=TOOLS, fast=False)
+    assert same_program(fast, slow)
+    np.testing.assert_allclose(fast.end[3], [1.5, -2.0, -3.0])  # G1 X0 Y0 Z0 under tool 2
