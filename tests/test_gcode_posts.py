@@ -446,4 +446,4 @@ def test_tool_offsets_reach_the_bulk_path_as_the_line_by_line_one():
     text = f"G0 X0 Y0 Z0\nT1 M6\nG43 H2\n{body}G91\n{inc}G90 G43.1 Z2\nG0 X20 Y0\n{arcs}G49\n{body}M2\n"
     fast, slow = parse(text, tools=TOOLS), parse(text, tools=TOOLS, fast=False)
     assert same_program(fast, slow)
-    np.testing.assert_allclose(fast.end[3], [1.5, -2.0, -3.0])  # G1 X0 Y0 Z0 under tool 2
+    np.testing.assert_allclose(fast.end[2], [1.5, -2.0, -3.0])  # G1 X0 Y0 Z0 under tool 2
