@@ -184,6 +184,8 @@ def test_the_line_blend_bound_is_never_below_the_dense_distance(cases):
     """The corner kernel's distance (where it certifies the crossing) and, where it cannot, the deviation
     kernel's (the caller's fallback) against 20,001 points of the blend — asymmetric blends with inner points
     pushed off the legs, in and out of the plane, as chained blends are."""
+    n = len(cases)
+    cases = cases + [cases[0]] * (8 - n)  # one shape for every example (each size would compile the kernels)
     pts, corner = (np.stack(x) for x in zip(*(_corner_blend(*c) for c in cases), strict=True))
     dev = np.asarray(K.blend_kernel(pts, corner)["dev"])
     lines = {k: np.zeros((len(pts), 3)) for k in ("center", "e1", "e2", "axis")}
@@ -192,7 +194,7 @@ def test_the_line_blend_bound_is_never_below_the_dense_distance(cases):
     fallback = np.asarray(
         K.deviation_kernel(coeffs, pts[:, 0], dict(lines, a=pts[:, 0], b=corner), dict(lines, a=corner, b=pts[:, 5]))
     )
-    for i in range(len(pts)):
+    for i in range(n):
         dense = _dense_line_distance(pts[i], corner[i])
         for bound in (dev[i], fallback[i]):
             if np.isfinite(bound):
