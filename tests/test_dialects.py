@@ -83,6 +83,7 @@ def test_user_dialect_file(tmp_path):
         ("[keywords]\nBSPLINE = 'nothing'\n", "meanings"),
         ("[addresses]\nP = 'weight'\n", "two letters"),
         ("[dialect\n", "not valid TOML"),
+        ("[dialect]\nprogram_numbers = 1\n", "program_numbers must be true or false"),
     ],
 )
 def test_bad_dialect_files(text, needle):
@@ -99,3 +100,38 @@ def test_fanuc_nurbs_cancelled_before_its_knots_are_complete():
     with pytest.raises(SourceError) as info:
         parse_gcode("G01 X0 Y0 F600\nG06.2 P3 K0 X0 Y0\nK0 X10 Y10\nK0 X20 Y0\nK1\nG01 X40\n", "f.nc", dialect="fanuc")
     assert info.value.line == 6 and "opened at line 2 is incomplete: 4 knots, 6 needed" in info.value.reason
+
+
+HAAS = """%
+O00001 (PART 7)
+G00 G17 G40 G49 G80 G90
+T2 M06
+G00 G90 G54 X0. Y0. S3000 M03
+G43 H02 Z1.
+G01 Z-0.1 F20.
+X1.
+G00 Z1.
+G91 G28 Z0.
+M30
+%
+O00002 (NOT CALLED)
+G01 X5.
+M99
+"""
+
+
+def test_fanuc_program_numbers_name_the_program_and_nothing_else():
+    """Every Fanuc / Haas post starts with the program number ``O00001 (NAME)``: the fanuc dialect reads it (and
+    those of subprograms written after M30, which nothing calls); LinuxCNC's O-words need a keyword and say which
+    dialect reads numbers; M98 / M99 calls are refused by name."""
+    p = parse_gcode(HAAS, "h.nc", dialect="fanuc", tools={2: (0.0, 0.0, 25.0)})
+    without = parse_gcode(HAAS.replace("O00001 (PART 7)\n", ""), "h.nc", dialect="fanuc", tools={2: (0.0, 0.0, 25.0)})
+    assert all(getattr(p, k).tobytes() == getattr(without, k).tobytes() for k in ("kind", "end", "feed"))
+    assert p.end[3].tolist() == pytest.approx([0.0, 0.0, 24.9])  # G43 H02 applied
+    with pytest.raises(SourceError) as info:
+        parse_gcode(HAAS, "h.nc", tools={2: (0.0, 0.0, 25.0)})
+    assert info.value.line == 2 and "--dialect fanuc" in info.value.reason
+    with pytest.raises(SourceError, match="M98 \\(Fanuc subprogram call\\) is not supported"):
+        parse_gcode("G0 X1\nM98 P2\nM30\n", "h.nc", dialect="fanuc")
+    with pytest.raises(SourceError, match="needs a keyword"):  # an O-word with more than a number stays control flow
+        parse_gcode("O100 X1\n", "h.nc", dialect="fanuc")

@@ -34,6 +34,9 @@ class Dialect:
     splines: tuple[str, ...] = ("G5", "G5.1", "G5.2", "G6.2")
     keywords: dict[str, str] = field(default_factory=dict)  # upper-case word -> meaning
     addresses: dict[str, str] = field(default_factory=dict)  # upper-case NAME -> meaning
+    #: A line of an ``O`` number alone (beside comments) names the program (Fanuc, Haas: ``O1001 (PART)``); else an
+    #: O-word needs a keyword (LinuxCNC's O-word control flow).
+    program_numbers: bool = False
 
 
 def _fail(src: str, reason: str) -> JaxcncError:
@@ -50,7 +53,7 @@ def parse_dialect(text: str, src: str = "<dialect>") -> Dialect:
     if unknown:
         raise _fail(src, f"unknown table(s) {sorted(unknown)}")
     d = doc.get("dialect", {})
-    unknown = set(d) - {"name", "comments", "arc_centers", "splines"}
+    unknown = set(d) - {"name", "comments", "arc_centers", "splines", "program_numbers"}
     if unknown:
         raise _fail(src, f"unknown key(s) {sorted(unknown)} in [dialect]")
     comments = d.get("comments", ["paren", "semicolon"])
@@ -62,6 +65,9 @@ def parse_dialect(text: str, src: str = "<dialect>") -> Dialect:
     splines = d.get("splines", [])
     if not isinstance(splines, list) or any(s not in SPLINE_SYNTAXES for s in splines):
         raise _fail(src, f"[dialect] splines must be a list of {', '.join(SPLINE_SYNTAXES)}")
+    program_numbers = d.get("program_numbers", False)
+    if not isinstance(program_numbers, bool):
+        raise _fail(src, "[dialect] program_numbers must be true or false")
     keywords = {str(k).upper(): v for k, v in doc.get("keywords", {}).items()}
     for k, v in keywords.items():
         if v not in KEYWORD_MEANINGS or not k.isalpha():
@@ -81,6 +87,7 @@ def parse_dialect(text: str, src: str = "<dialect>") -> Dialect:
         splines=tuple(splines),
         keywords=keywords,
         addresses=addresses,
+        program_numbers=program_numbers,
     )
 
 

@@ -164,6 +164,11 @@ _REFUSED_M = {
     19: "M19 spindle orientation needs a spindle; a laser machine has none",
     **{c: f"M{c} override control is not supported (a plan runs at 100 %)" for c in (48, 49, 50, 51, 52, 53)},
     60: "M60 pallet change is not supported",
+    **{
+        c: f"M{c} (Fanuc subprogram {what}) is not supported: have the post write the subprograms out (Fusion: "
+        "'Use subroutines' off), or call LinuxCNC O-word subroutines (o100 call)"
+        for c, what in ((98, "call"), (99, "return"))
+    },
     61: "M61 (set the tool number without a change) is not supported; use T and M6",
     **{c: f"M{c} digital output is not supported: switch the laser with M3/M4/M5" for c in (62, 63, 64, 65)},
     66: "M66 waiting on an input is not supported",

@@ -83,6 +83,8 @@ class Preprocessor:
     def __init__(self, text: str, file: str, max_depth: int = MAX_DEPTH, max_lines: int = MAX_LINES, dialect=None):
         self.file, self.max_depth, self.max_lines = file, max_depth, max_lines
         self.comment_styles = (dialect.paren_comments, dialect.semicolon_comments) if dialect else (True, True)
+        self.program_numbers = bool(dialect and dialect.program_numbers)
+        self.numbers: set[int] = set()  # lines that name the program ("O1001"): read, and nothing else
         self.lines = text.splitlines()
         self.globals: dict[object, float] = {}
         self.compact: dict[int, tuple[str, list[int]]] = {}
@@ -113,8 +115,16 @@ class Preprocessor:
             label = m.group(1).lower()
             rest = m.group(2)
             kw = next((k for k in _KEYWORDS if rest.lower().startswith(k)), None)
+            if kw is None and self.program_numbers and not rest.strip() and m.group(1).isdigit():
+                self.numbers.add(i)  # the program's number (the dialect's): it names the program, nothing else
+                continue
             if kw is None:
-                raise self.err(i, cols[0], f"O-word O{m.group(1)} needs a keyword such as sub, call, if, while")
+                hint = (
+                    " (a Fanuc / Haas program number? read the program with the fanuc dialect, --dialect fanuc)"
+                    if not rest.strip() and m.group(1).isdigit()
+                    else ""
+                )
+                raise self.err(i, cols[0], f"O-word O{m.group(1)} needs a keyword such as sub, call, if, while{hint}")
             off = m.start(2) + len(kw)
             ol = _OLine(i, label, kw, rest[len(kw) :], cols[off:])
             self.olines[i] = ol
@@ -277,6 +287,9 @@ class Preprocessor:
                 i += 1
                 continue
             ol = self.olines.get(i)
+            if i in self.numbers:
+                i += 1
+                continue
             if ol is None:
                 if not self.has_expressions(i, raw):
                     if raw.strip():
