@@ -84,6 +84,10 @@ def test_user_dialect_file(tmp_path):
         ("[addresses]\nP = 'weight'\n", "two letters"),
         ("[dialect\n", "not valid TOML"),
         ("[dialect]\nprogram_numbers = 1\n", "program_numbers must be true or false"),
+        ("[dialect]\nedge_offsets = 'yes'\n", "edge_offsets must be true or false"),
+        ("[g_codes]\nG71 = 'G81'\n", "one of G20, G21, G61, G61.1, G64"),
+        ("[g_codes]\nX71 = 'G21'\n", "a G code of the dialect"),
+        ("[g_codes]\nG71 = 21\n", "a G code of the dialect"),
     ],
 )
 def test_bad_dialect_files(text, needle):
@@ -135,3 +139,51 @@ def test_fanuc_program_numbers_name_the_program_and_nothing_else():
         parse_gcode("G0 X1\nM98 P2\nM30\n", "h.nc", dialect="fanuc")
     with pytest.raises(SourceError, match="needs a keyword"):  # an O-word with more than a number stays control flow
         parse_gcode("O100 X1\n", "h.nc", dialect="fanuc")
+
+
+SINUMERIK = """%_N_PART_7_MPF
+;$PATH=/_N_MPF_DIR
+N10 G90 G94 G17 G40
+N15 G71
+N20 T1 D1
+N25 M6
+N40 G0 X10 Y5
+N45 G0 Z15
+N50 G1 Z-1 F100
+N55 G64
+N60 X20 F500
+N65 G3 X25 Y10 I0 J5
+N70 G1 Y20
+N75 G0 Z15
+N80 D0
+N81 G0 Z15
+N82 G70
+N83 G0 Z1
+N84 G60
+N85 G1 X2 F10
+N90 M30
+"""
+
+
+def test_sinumerik_program_names_units_and_cutting_edges():
+    """What Sinumerik posts write: the ``%_N_NAME_MPF`` line, ``G71`` / ``G70`` (metric / inch), ``T1 D1`` (the tool's
+    offsets from the machine file's table; ``D0`` none), ``G60`` (exact stop, modal)."""
+    p = parse_gcode(SINUMERIK, "p.mpf", dialect="siemens", tools={1: (0.0, 0.0, 10.0)})
+    np.testing.assert_allclose(
+        p.end[1:-1],  # (row 0: the tool change; the last: the program's end)
+        [[10, 5, 0], [10, 5, 25], [10, 5, 9], [20, 5, 9], [25, 10, 9], [25, 20, 9], [25, 20, 25], [25, 20, 15],
+         [25, 20, 25.4], [50.8, 20, 25.4]],
+    )  # fmt: skip
+    assert np.all(np.isinf(p.blend_tol[1:-2])) and p.blend_tol[-2] == 0.0  # G60: exact corners from there (G61)
+    for text, needle in [
+        ("N1 T2 D1\n", "D1: tool T2 has no offsets"),
+        ("N1 T1 D2\n", "each tool one cutting edge"),
+        ("N1 D1\n", "no tool is selected"),
+        ("N1 G70 G71\n", "G71 and G70 are in the same modal group"),
+    ]:
+        with pytest.raises(SourceError, match=needle):
+            parse_gcode(text, "p.mpf", dialect="siemens", tools={1: (0.0, 0.0, 10.0)})
+    with pytest.raises(SourceError, match="unsupported word D1: cutter compensation"):  # D under LinuxCNC
+        parse_gcode("T1 D1\n", "p.ngc", tools={1: (0.0, 0.0, 10.0)})
+    with pytest.raises(SourceError, match="G71 roughing cycle"):  # G71 means a lathe cycle there
+        parse_gcode("G71\n", "p.ngc")

@@ -7,6 +7,7 @@ preprocessor did: a dialect only switches syntax on and off and names what its w
 
 from __future__ import annotations
 
+import re
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -22,6 +23,8 @@ else:  # pragma: no cover
 SPLINE_SYNTAXES = ("G5", "G5.1", "G5.2", "G6.2", "BSPLINE")
 KEYWORD_MEANINGS = ("BSPLINE",)
 ADDRESS_MEANINGS = ("weight", "degree", "knot_interval")
+#: What a dialect's G code may be declared to mean (``[g_codes]``): the units and the path-control modes.
+G_ALIAS_MEANINGS = frozenset({200, 210, 610, 611, 640})
 BUILTIN = ("linuxcnc", "siemens", "fanuc")
 
 
@@ -37,6 +40,17 @@ class Dialect:
     #: A line of an ``O`` number alone (beside comments) names the program (Fanuc, Haas: ``O1001 (PART)``); else an
     #: O-word needs a keyword (LinuxCNC's O-word control flow).
     program_numbers: bool = False
+    #: A line ``%_N_<NAME>_MPF`` (or ``_SPF``) names the program (Sinumerik): read, and nothing else.
+    program_names: bool = False
+    #: ``D<n>`` applies the selected tool's offsets (Sinumerik's cutting edge: ``T1 D1``; ``D0`` none), as
+    #: ``G43 H<T>`` does; else ``D`` is a cutter-compensation word, which is refused.
+    edge_offsets: bool = False
+    #: G codes of the dialect that mean another code (tenths: Sinumerik's ``G71`` is ``G21``, 710 -> 210).
+    g_codes: dict[int, int] = field(default_factory=dict)
+
+
+#: The dialect's switches (``[dialect]`` keys, true or false).
+_FLAGS = ("program_numbers", "program_names", "edge_offsets")
 
 
 def _fail(src: str, reason: str) -> JaxcncError:
@@ -49,11 +63,11 @@ def parse_dialect(text: str, src: str = "<dialect>") -> Dialect:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise _fail(src, f"not valid TOML: {exc}") from None
-    unknown = set(doc) - {"dialect", "keywords", "addresses"}
+    unknown = set(doc) - {"dialect", "keywords", "addresses", "g_codes"}
     if unknown:
         raise _fail(src, f"unknown table(s) {sorted(unknown)}")
     d = doc.get("dialect", {})
-    unknown = set(d) - {"name", "comments", "arc_centers", "splines", "program_numbers"}
+    unknown = set(d) - {"name", "comments", "arc_centers", "splines", *_FLAGS}
     if unknown:
         raise _fail(src, f"unknown key(s) {sorted(unknown)} in [dialect]")
     comments = d.get("comments", ["paren", "semicolon"])
@@ -65,9 +79,19 @@ def parse_dialect(text: str, src: str = "<dialect>") -> Dialect:
     splines = d.get("splines", [])
     if not isinstance(splines, list) or any(s not in SPLINE_SYNTAXES for s in splines):
         raise _fail(src, f"[dialect] splines must be a list of {', '.join(SPLINE_SYNTAXES)}")
-    program_numbers = d.get("program_numbers", False)
-    if not isinstance(program_numbers, bool):
-        raise _fail(src, "[dialect] program_numbers must be true or false")
+    flags = {k: d.get(k, False) for k in _FLAGS}
+    for k, v in flags.items():
+        if not isinstance(v, bool):
+            raise _fail(src, f"[dialect] {k} must be true or false")
+    g_codes = {}
+    for k, v in doc.get("g_codes", {}).items():
+        code, meaning = _g_tenths(k), _g_tenths(v) if isinstance(v, str) else None
+        if code is None or meaning is None or meaning not in G_ALIAS_MEANINGS:
+            raise _fail(
+                src, f"[g_codes] {k} = {v!r}: a G code of the dialect and the one it means, one of "
+                f"{', '.join(f'G{c / 10:g}' for c in sorted(G_ALIAS_MEANINGS))}",
+            )  # fmt: skip
+        g_codes[code] = meaning
     keywords = {str(k).upper(): v for k, v in doc.get("keywords", {}).items()}
     for k, v in keywords.items():
         if v not in KEYWORD_MEANINGS or not k.isalpha():
@@ -87,8 +111,15 @@ def parse_dialect(text: str, src: str = "<dialect>") -> Dialect:
         splines=tuple(splines),
         keywords=keywords,
         addresses=addresses,
-        program_numbers=program_numbers,
+        g_codes=g_codes,
+        **flags,
     )
+
+
+def _g_tenths(word: str) -> int | None:
+    """``"G71"`` -> 710, ``"G64.1"`` -> 641; ``None`` if not a G word."""
+    m = re.fullmatch(r"[Gg](\d{1,4})(?:\.(\d))?", word.strip())
+    return None if m is None else int(m.group(1)) * 10 + int(m.group(2) or 0)
 
 
 def load_dialect(name_or_path: str | Dialect | None) -> Dialect:

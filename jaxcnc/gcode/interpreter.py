@@ -215,6 +215,10 @@ _O_WORD_FIRST = re.compile(_O_WORD_LEAD)
 _O_WORD_LINE = re.compile(r"\n" + _O_WORD_LEAD)
 
 
+#: A Sinumerik program's name line (``%_N_PART_MPF``, ``_SPF`` for a subprogram), for dialects with ``program_names``.
+_PROGRAM_NAME = re.compile(r"^[ \t]*%_N_\w+_(?:MPF|SPF)[ \t]*$", re.MULTILINE | re.IGNORECASE)
+
+
 def _needs_preprocessor(text: str) -> bool:
     """The program has parameters, expressions or O-words (for :mod:`jaxcnc.gcode.preprocess`)."""
     return (
@@ -265,7 +269,11 @@ class _Block:
         g_groups: dict[int, Word] = {}
         m_groups: dict[int, Word] = {}
         for i, w in enumerate(words):
-            if w.letter not in _ALLOWED and w.letter not in dialect.addresses:
+            if (
+                w.letter not in _ALLOWED
+                and w.letter not in dialect.addresses
+                and not (w.letter == "D" and dialect.edge_offsets)
+            ):
                 why = _LETTER_REASONS.get(w.letter)
                 if w.letter == "E" and i and _written_against(words[i - 1], w):
                     number = f"{words[i - 1].letter}{words[i - 1].text}"
@@ -279,6 +287,9 @@ class _Block:
                     raise self.error(w, f"unknown or unsupported word {w.letter}{shown_number(w.text)}")
                 code = round(w.value * 10) if w.letter == "G" else round(w.value)
                 exact = w.value * 10 if w.letter == "G" else w.value
+                if w.letter == "G" and abs(exact - code) <= 1e-9 and code in dialect.g_codes:
+                    code = dialect.g_codes[code]  # the dialect's word for one of ours (Sinumerik's G71: G21)
+                    exact = float(code)
                 table, groups = (_G_GROUP, g_groups) if w.letter == "G" else (_M_GROUP, m_groups)
                 kind = None
                 if w.letter == "G" and abs(exact - code) <= 1e-9 and code not in table:
@@ -470,6 +481,8 @@ class _Interpreter:
             s.tool_offset = self.tool_row(b, b.take("H"), g43)
         if b.has_g(490) is not None:
             s.tool_offset = np.zeros(3)
+        if (d := b.take("D")) is not None:  # (only where the dialect has D select a cutting edge's offsets)
+            s.tool_offset = self.edge_row(b, d)
         # arc centre mode
         if b.has_g(901) is not None:
             s.arc_absolute = True
@@ -621,6 +634,21 @@ class _Interpreter:
             have = ", ".join(str(k) for k in sorted(self.tools)[:8]) + ("..." if len(self.tools) > 8 else "")
             where = f"the machine file's [tools] has {have}" if self.tools else "the machine file has no [tools] table"
             raise b.error(word, f"{what}: tool {number} has no offsets ({where}; H0 or G49: no offset)")
+        return self.tools[number].copy()
+
+    def edge_row(self, b: _Block, d: Word) -> np.ndarray:
+        """Sinumerik's ``D<n>``: the offsets ``(3,)`` of cutting edge ``n`` of the selected tool ``T`` (the machine
+        file's tool table has one edge a tool, ``D1``); ``D0`` none."""
+        if d.value == 0:
+            return np.zeros(3)
+        if d.value != 1:
+            raise b.error(d, f"D{d.text}: the machine file's [tools] gives each tool one cutting edge (D1; D0: none)")
+        if self.s.tool == 0:
+            raise b.error(d, "D1 selects a cutting edge of the selected tool, and no tool is selected (T)")
+        number = self.s.tool
+        if number not in self.tools:
+            where = "the machine file's [tools] lacks it" if self.tools else "the machine file has no [tools] table"
+            raise b.error(d, f"D1: tool T{number} has no offsets ({where}; D0: no offset)")
         return self.tools[number].copy()
 
     def g43_axes(self, b: _Block, g: Word, axes: dict[int, Word], motion_word: Word | None, dynamic: bool) -> None:
@@ -1162,6 +1190,8 @@ def parse_gcode(
         SourceError: naming ``file:line:column``, the word and the reason.
     """
     dia = load_dialect(dialect)
+    if dia.program_names and "%_N_" in text.upper():  # (blanked: the lines keep their numbers)
+        text = _PROGRAM_NAME.sub("", text)
     home_arr = np.asarray(start if home is None else home, dtype=np.float64)
     it = _Interpreter(file, np.asarray(start, dtype=np.float64), home_arr, dia, external, tools)
     open_percent: list[int] = []  # the line of a '%' that opens the program when no second '%' closes it
