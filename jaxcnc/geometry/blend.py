@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxcnc.buckets import bucket_size, pad_rows
+from jaxcnc.buckets import pad_rows
 from jaxcnc.geometry import poly
 from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
@@ -147,12 +147,15 @@ def _coeffs(pts: np.ndarray) -> np.ndarray:
 
 def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
     """:func:`~jaxcnc.geometry.blend_kernel.blend_kernel` on NumPy arrays, ``KERNEL_CHUNK`` blends at a time
-    (bounded working memory), each chunk padded to a bucket."""
+    (bounded working memory), and what remains ``KERNEL_SMALL`` at a time: every call has one of two shapes, so a
+    process compiles the kernel at most twice whatever the program (a small program once), and a compile cache
+    made by one program serves every other."""
     n = pts.shape[0]
     out: dict[str, np.ndarray] = {}
-    for lo in range(0, max(n, 1), KERNEL_CHUNK):
-        hi = min(n, lo + KERNEL_CHUNK)
-        m = bucket_size(hi - lo)
+    lo = 0
+    while lo < max(n, 1):
+        m = KERNEL_CHUNK if n - lo >= KERNEL_CHUNK else KERNEL_SMALL
+        hi = min(n, lo + m)
         pad_pts = np.concatenate([pts[lo:hi], np.broadcast_to(_UNIT_BLEND, (m - (hi - lo), 6, 3))])
         pad_corner = np.concatenate([corner[lo:hi], np.zeros((m - (hi - lo), 3))])
         part = {k: np.asarray(v)[: hi - lo] for k, v in blend_kernel(pad_pts, pad_corner).items()}
@@ -162,6 +165,7 @@ def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
             if k not in out:
                 out[k] = np.empty((n,) + v.shape[1:], v.dtype)
             out[k][lo:hi] = v
+        lo = hi
     return out
 
 
@@ -209,8 +213,9 @@ def _blend_round(
     return out, np.concatenate(kept), np.concatenate(kept_pts)
 
 
-#: Blends measured by one call of the kernel.
+#: Blends measured by one call of the kernel, and by the calls for what remains (the kernel's two shapes).
 KERNEL_CHUNK = 1 << 16
+KERNEL_SMALL = 1 << 12
 #: A harmless blend (a straight quintic) for the padding rows of :func:`_kernel`.
 _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axis=1)
 
@@ -219,16 +224,18 @@ def _deviation(
     spans: Spans, arrays: dict, i: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray, coeffs: np.ndarray
 ) -> np.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound):
-    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel`, ``DEVIATION_CHUNK`` blends a call (its working memory
-    bounded: the 1 M-block contour's 40k arc junctions in one call held ~100 MB more), each call padded to a bucket
-    (at least ``DEVIATION_BUCKET`` rows: the shrink rounds measure fewer blends each time, and each size would
-    compile). ``arrays``: ``span_arrays(spans)``."""
+    :func:`~jaxcnc.geometry.blend_kernel.deviation_kernel`, ``DEVIATION_CHUNK`` blends a call, the last padded: one
+    shape, so the kernel (the longest of the planner's to compile: 3.2-3.4 s, and ~0.4-0.7 s to load from the
+    compile cache on the development machine) compiles once per process and its cache serves every program (the
+    shrink rounds measure fewer blends each time; sizes padded to buckets compiled it twice in a 2000-block
+    program). Its working memory is bounded too: the 1 M-block contour's 40k arc junctions in one call held ~100 MB
+    more. ``arrays``: ``span_arrays(spans)``."""
     n = i.size
     length = spans.length[i]
     dev = np.empty(n)
     for lo in range(0, n, DEVIATION_CHUNK):
         c = slice(lo, min(n, lo + DEVIATION_CHUNK))
-        m = max(bucket_size(c.stop - lo), DEVIATION_BUCKET)
+        m = DEVIATION_CHUNK
         start = evaluate_path(arrays, i[c], length[c] - ell_a[c])[0]
         piece_in = _pieces(spans, arrays, i[c], length[c] - ell_a[c], length[c])
         piece_out = _pieces(spans, arrays, i[c] + 1, np.zeros(c.stop - lo), ell_b[c])
@@ -238,9 +245,8 @@ def _deviation(
     return dev
 
 
-#: Fewest rows :func:`_deviation` measures in one call (a few compiled sizes for all rounds), and the most.
-DEVIATION_BUCKET = 1024
-DEVIATION_CHUNK = 1 << 13
+#: Rows :func:`_deviation` measures in one call (its one compiled shape).
+DEVIATION_CHUNK = 1 << 11
 
 
 def _trims(n: int, j: np.ndarray, ell_a: np.ndarray, ell_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

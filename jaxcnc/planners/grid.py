@@ -227,8 +227,8 @@ def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray)
 def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, ...]:
     """:func:`_boxes` for NumPy queries ``(q,)``: ``(t_a, k_a, t_b, k_b, t_lo, t_hi, k_lo, k_hi)``, each ``(q, 3)``.
 
-    On a CPU in calls of ``BOX_CHUNK`` rows (the last one padded; all dispatched before any is read), else, and
-    for fewer rows, in one call padded to a bucket: few compiled sizes either way.
+    On a CPU in calls of ``BOX_CHUNK`` rows, the last one padded, however few (all dispatched before any is read;
+    one row count for every window of every program), else in one call padded to a bucket.
     """
     q = span.size
     out = [np.empty((3, q)) for _ in range(8)]
@@ -242,7 +242,7 @@ def _boxes_into(
     """:func:`boxes_at` written straight into columns ``cols`` ``(q,)`` of eight axis-major ``(3, n)`` arrays
     ``out`` (no joined ``(q, 3)`` results to scatter afterwards)."""
     q = span.size
-    m = BOX_CHUNK if q > BOX_CHUNK and on_cpu() else bucket_size(q)
+    m = BOX_CHUNK if on_cpu() else bucket_size(q)
     n = max(-(-q // m), 1) * m
     which, a, d = np.zeros(n, np.int64), np.zeros(n), np.zeros(n)
     which[:q], a[:q], d[:q] = span, s0, delta
