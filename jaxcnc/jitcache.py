@@ -41,6 +41,7 @@ import threading
 import types
 import weakref
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -92,7 +93,8 @@ def release_when_crowded(limit: int | None = None) -> bool:
         return False
     with _LOCK:
         for instance in list(_INSTANCES):
-            instance.calls.clear()
+            with instance.lock:
+                instance.calls.clear()
         jax.clear_caches()
     gc.collect()  # the executables go with the last Python objects that hold them
     return True
@@ -109,6 +111,30 @@ def cached_jit(
     if fun is None:
         return functools.partial(cached_jit, static_argnames=static_argnames, compiler_options=compiler_options)
     return _CachedJit(fun, tuple(static_argnames), compiler_options)
+
+
+#: The compile-ahead thread, once made (in a list: a module global's value keys the stored programs).
+_AHEAD: list[ThreadPoolExecutor] = []
+
+
+def compile_ahead(fun: Callable, *args, **kwargs) -> Future:
+    """Call ``fun(*args, **kwargs)`` (a compiled function, on arguments of the shapes a later call will have) in a
+    background thread, under the caller's default device, and return its future: the program is compiled (or
+    loaded from the compile cache) while the caller goes on, and the later call finds it ready. Wait on the
+    future before that call (else both compile it). XLA compiles outside the GIL: on two cores a first run hides
+    one program's compile behind the caller's work. The result is the call's."""
+    with _LOCK:
+        if not _AHEAD:
+            _AHEAD.append(ThreadPoolExecutor(1, thread_name_prefix="jaxcnc-compile-ahead"))
+    device = jax.config.jax_default_device  # thread-local: the worker enters the caller's
+
+    def run():
+        if device is None:
+            return fun(*args, **kwargs)
+        with jax.default_device(device):
+            return fun(*args, **kwargs)
+
+    return _AHEAD[0].submit(run)
 
 
 def export_dir() -> Path | None:
@@ -131,6 +157,8 @@ class _CachedJit:
         self.signature = inspect.signature(fun)
         self.names = [k for k in self.signature.parameters if k not in static]  # the traced arguments, in order
         self.calls: dict[tuple, Callable | None] = {}  # key -> the stored program's call (None: jax.jit's)
+        # one program's load or export at a time; other functions' go on in other threads (compile_ahead)
+        self.lock = threading.RLock()
         functools.update_wrapper(self, fun)
         _INSTANCES.add(self)
 
@@ -147,7 +175,7 @@ class _CachedJit:
         if any(v is None for _, v in statics):  # a static argument that cannot be named across processes
             return self.jitted(*args, **kwargs)
         key = (repr(statics), str(tree), tuple(_aval_key(x) for x in leaves), _platform())
-        with _LOCK:
+        with self.lock:
             call = self.calls.get(key, False)
             if call is False:
                 call = self.calls[key] = self._load_or_export(root, key, static, dynamic)
@@ -156,7 +184,7 @@ class _CachedJit:
         try:
             return call(*dynamic)
         except Exception:  # (arguments on another device than the program's platform, say): as jax.jit, from now on
-            with _LOCK:
+            with self.lock:
                 self.calls[key] = None
             return self.jitted(*args, **kwargs)
 

@@ -44,6 +44,7 @@ from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, junction_curvatures, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
+from jaxcnc.jitcache import compile_ahead
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -356,6 +357,14 @@ def blend_path(
     keep = np.ones(j.size, bool)
     # what the blends' points and deviations evaluate, made once (dropped before the fields)
     arrays = span_arrays(spans)
+    # the blends' kernel compiles (or loads) in the background while the shrink rounds measure with the deviation
+    # kernel: the two longest compiles of a first run, side by side on two cores
+    first = KERNEL_CHUNK if j.size >= KERNEL_CHUNK else KERNEL_SMALL
+    kernel_ahead = (
+        compile_ahead(blend_kernel, np.broadcast_to(_UNIT_BLEND, (first, 6, 3)), np.zeros((first, 3)))
+        if check.size
+        else None
+    )
     for _ in range(SHRINK_ROUNDS):
         if check.size == 0:
             break
@@ -364,6 +373,8 @@ def blend_path(
         bad = dev > tol[j[check]]
         ell[check[bad]] *= np.clip(0.95 * tol[j[check[bad]]] / dev[bad], 0.05, 0.95)
         check = check[bad]
+    if kernel_ahead is not None:
+        kernel_ahead.result()
     keep[check] = False  # still too far after the rounds: an exact corner
     keep &= ell > MIN_LENGTH_MM
     j, ell, lines = j[keep], ell[keep], lines[keep]

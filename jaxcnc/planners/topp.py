@@ -37,7 +37,7 @@ from jaxcnc.geometry.blend_kernel import cpu_loop_options
 from jaxcnc.geometry.evaluate import junction_curvatures, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
 from jaxcnc.geometry.spans import Spans, pad_spans, pad_tables, take_spans
-from jaxcnc.jitcache import cached_jit
+from jaxcnc.jitcache import cached_jit, compile_ahead
 from jaxcnc.memory import release_free_heap
 from jaxcnc.planners.grid import (
     GRID_MARGIN,
@@ -511,7 +511,7 @@ def plan_topp(req: PlanRequest) -> Plan:
     facts = _ProgramFacts.of(req)
     # large plans derive where the segments lie from the counts (refined in place) rather than store it
     segments = _SegmentTable(capacity, *((spans.length, counts) if large else ()))
-    segments.prepare(req.machine.tick_hz)
+    segments.prepare(req.machine.tick_hz, ahead=not large)  # (large: compiled now, before the windows' memory)
     if large:
         release_free_heap()  # what the junctions and the alignment's compile left
     first, x_start, window = 0, 0.0, WINDOW_INTERVALS
@@ -1042,18 +1042,25 @@ class _SegmentTable:
         self.cols = {k: aligned_array(rows + (k == "v0"), self._DTYPES.get(k, np.float64)) for k in keep}
         self.v1: np.ndarray | None = None  # None: v1[k] is v0[k + 1]
         self.general: list[tuple[np.ndarray, np.ndarray]] = []  # (segments, (g, 4) trapezoids) the Ramps store whole
+        self.aligning: Future | None = None  # the alignment compiled ahead (prepare)
 
     def __len__(self) -> int:
         """Rows allocated (at least the segments expected)."""
         return int(self.cols["rest"].shape[0])
 
-    def prepare(self, tick_hz: float) -> None:
+    def prepare(self, tick_hz: float, ahead: bool = False) -> None:
         """Compile the tick alignment for the bucket the plan will most likely have, now, while little memory
         is in use: compiled at the end, the compiler's working memory would sit on top of the whole plan's.
-        Once per bucket and process (a run on zeros, discarded)."""
+        Once per bucket and process (a run on zeros, discarded). ``ahead``: in the background while the windows
+        are solved (:func:`~jaxcnc.jitcache.compile_ahead`; 1.6-2.0 s of a first run's compile on the development
+        machine), :meth:`plan` waiting for it."""
         mb = len(self)
         if mb not in _ALIGN_COMPILED:
-            _align_total(np.zeros(mb), np.ones(mb, bool), tick_hz)
+            args = (np.zeros(mb), np.ones(mb, bool), tick_hz)
+            if ahead:
+                self.aligning = compile_ahead(_align_total, *args)
+            else:
+                _align_total(*args)
             _ALIGN_COMPILED.add(mb)
 
     def _reserve(self, rows: int) -> None:
@@ -1182,6 +1189,9 @@ class _SegmentTable:
         of their count, as the compiled alignment expects). The tick alignment reads the segments' durations
         alone: only those (and where the motion rests) are handed to the compiled program. The plan keeps the
         columns as stored here: what is derived here stays derived there (:class:`~.timelaw.Plan`'s storage)."""
+        if self.aligning is not None:
+            self.aligning.result()  # (its exception, if any)
+            self.aligning = None
         n = self.n
         mb = bucket_size(n)
         self._reserve(mb)
