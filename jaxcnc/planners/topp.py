@@ -216,13 +216,18 @@ def _box_pieces(g: dict, v_max, a_max, chord_tol, tick_hz, axes: tuple[int, ...]
     forward pieces and the trapezoids' inputs, each from the caps and the grid. The same values as one program,
     bit for bit, in 40 % less CPU (a 131k-interval window of the 100k-block contour, 2026-11-23: 52 → 31 ms): XLA
     fuses one program's many outputs into loops that spill, and copies the caps' square roots and arc cosines into
-    each consumer."""
+    each consumer. Two of the four after the caps are called in the compile-ahead thread
+    (:func:`~jaxcnc.jitcache.compile_ahead`): a first run compiles them beside the other two (4.4 s of compile for
+    the five on the development machine, one after the other)."""
     limits = (v_max, a_max, chord_tol, tick_hz)
     caps = _box_part(g, None, *limits, axes=axes, j_max=j_max, part="caps")
+    later = {
+        p: compile_ahead(_box_part, g, caps, *limits, axes=axes, j_max=j_max, part=p) for p in ("backward", "laws")
+    }
     x_static = _box_part(g, caps, *limits, axes=axes, j_max=j_max, part="static")
-    alpha, beta = _box_part(g, caps, *limits, axes=axes, j_max=j_max, part="backward")
     a_fwd, b_fwd = _box_part(g, caps, *limits, axes=axes, j_max=j_max, part="forward")
-    laws = _box_part(g, caps, *limits, axes=axes, j_max=j_max, part="laws")
+    alpha, beta = later["backward"].result()
+    laws = later["laws"].result()
     pieces = dict(x_static=x_static, alpha=alpha, beta=beta, cap_b=caps["cap_b"], a=a_fwd, b=b_fwd, delta=g["delta"])
     return pieces, laws
 
