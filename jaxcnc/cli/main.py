@@ -639,6 +639,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from jaxcnc.bench.raster import run_raster_benchmark
 
         results["raster"] = run_raster_benchmark(repeats=min(args.repeats, 2))  # 1M G-code lines a run
+    if args.suite in ("all", "command"):
+        from jaxcnc.bench.command import run_command_benchmarks
+
+        results["command"] = run_command_benchmarks(peers=args.peers, repeats=args.repeats)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
     return 0
@@ -920,7 +924,9 @@ def build_parser() -> argparse.ArgumentParser:
         "parts with a 40 Hz mode (job time, residual vibration, contour error, planning time). scanner: galvo vector "
         "list compilation (vectors/s) and emulation at the 10 us tick (ticks/s) against real time. pbf: slicing and "
         "hatching against PySLM, Dask scaling. split: stage + scanner split against the stage alone and the "
-        "documents' method. raster: an image planned natively against the same path as per-pixel G-code. Every run "
+        "documents' method. raster: an image planned natively against the same path as per-pixel G-code. command: "
+        "the whole 'jaxcnc plan' (parse, plan, ticks, check) in a fresh process on 1.5k-2.3k-block programs, with an "
+        "empty compile cache and a warm one. Every run "
         "prints the date, the commit and the load average; JIT compile time "
         "is reported apart. A missing input is an error (exit 2), never replaced by another.",
     )
@@ -967,6 +973,7 @@ def build_parser() -> argparse.ArgumentParser:
             "vibration",
             "scanner",
             "raster",
+            "command",
         ),
         help="which benchmarks (default: %(default)s)",
     )
