@@ -21,7 +21,7 @@ from jaxcnc.planners.job import PlannedJob
 from jaxcnc.program import Event, Kind, LaserMode
 from jaxcnc.ticks.laser import LatencyShift, power_of_rows, shift_laser_events
 from jaxcnc.ticks.pso import pso_events
-from jaxcnc.ticks.sample import Sampler, TickSampler, machine_axes, quantize, sampled_ahead
+from jaxcnc.ticks.sample import CHUNK_TICKS, Sampler, TickSampler, machine_axes, quantize, sampled_ahead
 
 _EVENT_OF = {
     Event.PROGRAM_STOP: EventKind.PROGRAM_STOP,
@@ -146,12 +146,18 @@ def write_samples(
                 cmd = cmd[pos.shape[0] :]
 
         def put(first: int, p: np.ndarray, after: np.ndarray) -> None:
-            pos, fine = quantize(p, m.discrete_mm)
+            # the chunk and the row after it quantised in one call, padded to one shape for every chunk of every job
+            # (elementwise: the same values as apart; a job's last chunk and that row compiled a shape each)
+            rows = p.shape[0]
+            both = np.zeros((max(rows, CHUNK_TICKS) + 1, p.shape[1]))
+            both[:rows], both[rows] = p, after[0]
+            q_pos, q_fine = (np.asarray(a) for a in quantize(both, m.discrete_mm))
+            pos, fine = q_pos[:rows], q_fine[:rows]
             lit = None
             if power:
                 # the laser from the positions as the table holds them, the ones the check reads: a tick on a raster
                 # pixel's edge, or an M4 speed, comes out the same for both to the last bit
-                pos_a, fine_a = quantize(after, m.discrete_mm)
+                pos_a, fine_a = q_pos[rows : rows + 1], q_fine[rows : rows + 1]
                 pa = fixed_to_mm(np.vstack([pos, pos_a]), np.vstack([fine, fine_a]), m.discrete_mm)
                 lit = power_of_rows(pa, events_out, first, m.tick_hz, m.laser)
                 if power_scale is not None:
