@@ -21,8 +21,9 @@ from tests.test_plan_memory import _same_plan
 MACHINE = BENCH_MACHINE + "corner_tol_mm = 0.01\n"
 
 
-def _numpy_check(arrays, grid, out, a_max, axes, first=0, only=None):
-    """What the boxed windows ran before: the NumPy check on every axis."""
+def _numpy_check(arrays, grid, out, a_max, axes, first=0, only=None, midpoints=None):
+    """What the boxed windows ran before: the NumPy check on every axis (``midpoints``, the compiled check's frames
+    made ahead, unused)."""
     acc = np.minimum(np.asarray(a_max), BIG)[None, :] * out["share"][: len(grid), None]
     return topp.interior_excess(arrays, grid, out["x_node"][: len(grid) + 1], acc, first, only)
 

@@ -447,6 +447,16 @@ def interior_excess(
     return bad
 
 
+def excess_midpoints(arrays: dict, grid: Grid, first: int = 0, only: str | None = None) -> tuple | None:
+    """What :func:`grid_excess` checks, from the grid alone: the curved intervals without a box ``(q,)`` and the
+    frames at their midpoints (:func:`~.grid.node_frames`); ``None`` where there are none. Independent of the
+    solve: :func:`_solve_refined` has it made in the compile-ahead thread while the window is solved."""
+    idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
+    if idx.size == 0:
+        return None
+    return idx, node_frames(arrays, grid.span[idx] - first, grid.s_start[idx] + grid.delta[idx] / 2, only)
+
+
 def grid_excess(
     arrays: dict,
     grid: Grid,
@@ -455,6 +465,7 @@ def grid_excess(
     axes: tuple[int, ...],
     first: int = 0,
     only: str | None = None,
+    midpoints: tuple | None | bool = False,
 ) -> np.ndarray:
     """``(m,)`` :func:`interior_excess` of a window's grid as :func:`_solve_grid` planned it (``out``: its
     ``x_node`` and ``share``), by compiled programs: the frames at the midpoints of the curved intervals without
@@ -462,15 +473,16 @@ def grid_excess(
     (:func:`_excess`, reading the ends' frames from the grid's axis-major storage in place). The same values as
     :func:`interior_excess`, which evaluates it in NumPy (tested against it). On the 100k-block contour (98k arc
     intervals beside 400k boxed ones; ``benchmarks/plan_stages.py``, two interleaved runs against the NumPy check):
-    35-39 -> 19-25 ms CPU a plan."""
-    m = len(grid)
-    idx = np.flatnonzero(grid.curved & ~grid.boxed & (grid.delta > 0))  # boxes hold inside by construction
-    bad = np.zeros(m, bool)
-    if idx.size == 0:
+    35-39 -> 19-25 ms CPU a plan. ``midpoints``: :func:`excess_midpoints` of the same grid, where made already.
+    """
+    bad = np.zeros(len(grid), bool)
+    if midpoints is False:
+        midpoints = excess_midpoints(arrays, grid, first, only)
+    if midpoints is None:
         return bad
+    idx, mid = midpoints
     q = idx.size
     qb = bucket_size(q)
-    mid = node_frames(arrays, grid.span[idx] - first, grid.s_start[idx] + grid.delta[idx] / 2, only)
     at = _pad_aligned(idx, qb, 0)
     rows = {
         "x_a": _pad_aligned(out["x_node"][idx], qb, 0.0),
@@ -756,9 +768,12 @@ def _solve_refined(
                 grid = build_grid(req.spans, counts, arrays if at == first else None, first, last, pad_to=pad_to)
             else:
                 grid, grid0 = grid0, None  # (a refinement builds it again)
+            only = "arc" if np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC) else None
+            # the interior check's midpoint frames depend on the grid alone: made (and in a first run compiled)
+            # in the compile-ahead thread while the window is solved
+            midpoints = compile_ahead(excess_midpoints, arrays, grid, at, only)
             out = _solve_grid(req, facts, grid, x_start)
-            arcs = np.all(kinds[curved & (kinds != SpanKind.BLEND)] == SpanKind.ARC)
-            bad = grid_excess(arrays, grid, out, req.a_max, facts.axes, at, "arc" if arcs else None)
+            bad = grid_excess(arrays, grid, out, req.a_max, facts.axes, at, only, midpoints.result())
         bad = bad | _stalled(curved[grid.span - first], grid, out["x_node"])
         if not bad.any():
             return grid, out
