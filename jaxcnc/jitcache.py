@@ -25,6 +25,10 @@ A process that lives long (a planning service, a worker of a build, a user's loo
 it compiled: :func:`release_when_crowded` hands them back before they reach the kernel's limit on memory mappings
 (each XLA:CPU executable maps memory of its own, and past ``vm.max_map_count`` LLVM crashes compiling the next one).
 :func:`~jaxcnc.planners.job.plan_job` and every job of :mod:`jaxcnc.jobs` call it first.
+
+A first run compiles its programs where they are first called, one after the other; :func:`compile_ahead` calls one
+in a background thread while the caller goes on (XLA compiles outside the GIL), so on two cores two compiles
+proceed side by side (docs/planning.md, "First runs").
 """
 
 from __future__ import annotations
