@@ -47,11 +47,6 @@ def _run(program: Path, machine: Path, out: Path, cache: Path) -> tuple[float, f
     return wall, cpu
 
 
-def runs_of(row: dict) -> tuple[dict, dict]:
-    """A program's cold and warm figures."""
-    return row["cold"], row["warm"]
-
-
 def _programs(names: tuple[str, ...], peers: Path) -> list[Path]:
     own = own_programs_dir()
     out = []
@@ -97,6 +92,7 @@ def run_command_benchmarks(
                     "repeats": repeats,
                 }
             rows[path.stem] = row
-            cells = [f"{r['wall_min_s']:>8.2f}/{r['wall_median_s']:.2f} s {r['cpu_min_s']:>6.1f}" for r in runs_of(row)]
+            figures = (row["cold"], row["warm"])
+            cells = [f"{r['wall_min_s']:>8.2f}/{r['wall_median_s']:.2f} s {r['cpu_min_s']:>6.1f}" for r in figures]
             print(f"  {path.stem:<14} {blocks:>6} {cells[0]} {cells[1]}")
     return {"info": info, "programs": rows}

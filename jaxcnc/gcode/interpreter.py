@@ -628,12 +628,16 @@ class _Interpreter:
         number = int(h.value) if h is not None else self.s.loaded_tool
         if number == 0:
             return np.zeros(3)
+        what = f"H{h.text}" if h is not None else f"G{g.text} without H (the loaded tool T{number})"
+        return self.table_row(b, h if h is not None else g, number, f"{what}: tool {number}", "H0 or G49")
+
+    def table_row(self, b: _Block, word: Word, number: int, who: str, cancel: str) -> np.ndarray:
+        """Tool ``number``'s offsets ``(3,)`` from the tool table, or the error at ``word``: ``who`` has no offsets
+        (what the table has; ``cancel``: the words for no offset)."""
         if number not in self.tools:
-            word = h if h is not None else g
-            what = f"H{h.text}" if h is not None else f"G{g.text} without H (the loaded tool T{number})"
             have = ", ".join(str(k) for k in sorted(self.tools)[:8]) + ("..." if len(self.tools) > 8 else "")
             where = f"the machine file's [tools] has {have}" if self.tools else "the machine file has no [tools] table"
-            raise b.error(word, f"{what}: tool {number} has no offsets ({where}; H0 or G49: no offset)")
+            raise b.error(word, f"{who} has no offsets ({where}; {cancel}: no offset)")
         return self.tools[number].copy()
 
     def edge_row(self, b: _Block, d: Word) -> np.ndarray:
@@ -645,11 +649,7 @@ class _Interpreter:
             raise b.error(d, f"D{d.text}: the machine file's [tools] gives each tool one cutting edge (D1; D0: none)")
         if self.s.tool == 0:
             raise b.error(d, "D1 selects a cutting edge of the selected tool, and no tool is selected (T)")
-        number = self.s.tool
-        if number not in self.tools:
-            where = "the machine file's [tools] lacks it" if self.tools else "the machine file has no [tools] table"
-            raise b.error(d, f"D1: tool T{number} has no offsets ({where}; D0: no offset)")
-        return self.tools[number].copy()
+        return self.table_row(b, d, self.s.tool, f"D1: tool T{self.s.tool}", "D0")
 
     def g43_axes(self, b: _Block, g: Word, axes: dict[int, Word], motion_word: Word | None, dynamic: bool) -> None:
         """G43.1 (the axis words are the tool offsets, in program units) and G43.2 (adds tool ``H``'s offsets, or

@@ -115,15 +115,13 @@ class Preprocessor:
             label = m.group(1).lower()
             rest = m.group(2)
             kw = next((k for k in _KEYWORDS if rest.lower().startswith(k)), None)
-            if kw is None and self.program_numbers and not rest.strip() and m.group(1).isdigit():
+            number = kw is None and not rest.strip() and m.group(1).isdigit()  # "O1001" alone: a program number
+            if number and self.program_numbers:
                 self.numbers.add(i)  # the program's number (the dialect's): it names the program, nothing else
                 continue
             if kw is None:
-                hint = (
-                    " (a Fanuc / Haas program number? read the program with the fanuc dialect, --dialect fanuc)"
-                    if not rest.strip() and m.group(1).isdigit()
-                    else ""
-                )
+                hint = " (a Fanuc / Haas program number? read the program with the fanuc dialect, --dialect fanuc)"
+                hint = hint if number else ""
                 raise self.err(i, cols[0], f"O-word O{m.group(1)} needs a keyword such as sub, call, if, while{hint}")
             off = m.start(2) + len(kw)
             ol = _OLine(i, label, kw, rest[len(kw) :], cols[off:])

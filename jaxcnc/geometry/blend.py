@@ -155,7 +155,7 @@ def _kernel(pts: np.ndarray, corner: np.ndarray) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     lo = 0
     while lo < max(n, 1):
-        m = KERNEL_CHUNK if n - lo >= KERNEL_CHUNK else KERNEL_SMALL
+        m = _kernel_rows(n - lo)
         hi = min(n, lo + m)
         pad_pts = np.concatenate([pts[lo:hi], np.broadcast_to(_UNIT_BLEND, (m - (hi - lo), 6, 3))])
         pad_corner = np.concatenate([corner[lo:hi], np.zeros((m - (hi - lo), 3))])
@@ -217,6 +217,13 @@ def _blend_round(
 #: Blends measured by one call of the kernel, and by the calls for what remains (the kernel's two shapes).
 KERNEL_CHUNK = 1 << 16
 KERNEL_SMALL = 1 << 12
+
+
+def _kernel_rows(remaining: int) -> int:
+    """The rows of :func:`_kernel`'s next call with ``remaining`` blends to measure (one of its two shapes)."""
+    return KERNEL_CHUNK if remaining >= KERNEL_CHUNK else KERNEL_SMALL
+
+
 #: A harmless blend (a straight quintic) for the padding rows of :func:`_kernel`.
 _UNIT_BLEND = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], axis=1)
 
@@ -359,7 +366,7 @@ def blend_path(
     arrays = span_arrays(spans)
     # the blends' kernel compiles (or loads) in the background while the shrink rounds measure with the deviation
     # kernel: the two longest compiles of a first run, side by side on two cores
-    first = KERNEL_CHUNK if j.size >= KERNEL_CHUNK else KERNEL_SMALL
+    first = _kernel_rows(j.size)
     kernel_ahead = (
         compile_ahead(blend_kernel, np.broadcast_to(_UNIT_BLEND, (first, 6, 3)), np.zeros((first, 3)))
         if check.size
