@@ -79,9 +79,9 @@ def blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray
 
 
 @cache
-def _compiled(fn):
-    """``fn`` jitted with :func:`cpu_loop_options`."""
-    return cached_jit(fn, compiler_options=cpu_loop_options())
+def _compiled(fn, *static: str):
+    """``fn`` jitted with :func:`cpu_loop_options` (arguments ``static`` static)."""
+    return cached_jit(fn, static_argnames=static, compiler_options=cpu_loop_options())
 
 
 def _blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray]:
@@ -234,7 +234,8 @@ N_DEVIATION = 25
 
 def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound), compiled with
-    :func:`cpu_loop_options`.
+    :func:`cpu_loop_options`, for arcs that rise (helices) only where a part given is one (the formulas of
+    :func:`_piece_distance`: one program each way).
 
     ``coeffs`` ``(J, 6, 4)``: the blends' homogeneous power-basis coefficients (weights 1) relative to their
     start ``start`` ``(J, 3)``. ``piece_in``, ``piece_out``: each a dict of ``(J, ...)`` arrays: ``a``, ``b``
@@ -244,7 +245,10 @@ def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, pi
     The bound holds between the ``N_DEVIATION`` samples too, however often the nearer piece changes
     (:func:`deviation_bound`).
     """
-    return _compiled(_deviation_kernel)(coeffs, start, piece_in, piece_out)
+    helix = tuple(
+        bool(np.any(np.asarray(pc["is_arc"]) & (np.asarray(pc["rise"]) != 0))) for pc in (piece_in, piece_out)
+    )
+    return _compiled(_deviation_kernel, "helix")(coeffs, start, piece_in, piece_out, helix=helix)
 
 
 #: Sub-intervals the interval with the largest bound is cut into and measured again (:func:`deviation_bound`),
@@ -296,20 +300,26 @@ def deviation_bound(measure, u: jnp.ndarray) -> jnp.ndarray:
 
     cut = jnp.asarray(np.linspace(0.0, 1.0, REFINE + 1))[None, :]
 
-    def refine(state):
-        """Cut the interval with the largest bound into ``REFINE`` and bound those again."""
-        per, u, others = state
+    def largest(per, u, others):
+        """The ends ``(J, 1)`` of the interval with the largest bound, and ``others`` raised to the rest's."""
         k = jnp.argmax(per, axis=1)
         others = jnp.maximum(others, jnp.max(jnp.where(jnp.arange(per.shape[1]) == k[:, None], -jnp.inf, per), axis=1))
         lo = jnp.take_along_axis(u, k[:, None], axis=1)
-        u = lo + (jnp.take_along_axis(u, k[:, None] + 1, axis=1) - lo) * cut
-        return bounds(u), u, others
+        return lo, jnp.take_along_axis(u, k[:, None] + 1, axis=1), others
+
+    def refine(_, state):
+        """Cut the interval with the largest bound into ``REFINE`` and bound those again."""
+        lo, hi, others, _ = state
+        u = lo + (hi - lo) * cut
+        per = bounds(u)
+        return *largest(per, u, others), per
 
     per = bounds(u)
-    state = refine((per, jnp.broadcast_to(u, (per.shape[0], u.shape[1])), jnp.full(per.shape[:1], -jnp.inf)))
-    # the later levels in a loop: one copy of the measurement in the program instead of one a level (the kernel
-    # compiled in 3.3-3.9 s and loaded from the compile cache in ~0.5 s with the levels written out)
-    per, _, others = jax.lax.fori_loop(0, REFINE_LEVELS - 1, lambda _, s: refine(s), state)
+    state = largest(per, jnp.broadcast_to(u, (per.shape[0], u.shape[1])), jnp.full(per.shape[:1], -jnp.inf))
+    # every level in a loop: one copy of the measurement in the program for all of them (the kernel compiled in
+    # 3.3-3.9 s and loaded from the compile cache in ~0.5 s with the levels written out). The last level's
+    # intervals raise ``others`` too, which its maximum covers anyway.
+    _, _, others, per = jax.lax.fori_loop(0, REFINE_LEVELS, refine, (*state, jnp.zeros((per.shape[0], REFINE))))
     return jnp.maximum(others, jnp.max(per, axis=1))
 
 
@@ -352,13 +362,13 @@ def _arc_excess(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
     return jnp.where(pc["is_arc"][:, None], excess, 0.0)
 
 
-def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
+def _piece_distance(p: list[jnp.ndarray], pc: dict, helix: bool) -> jnp.ndarray:
     """Distance ``(J, Q)`` from points ``p`` (three ``(J, Q)`` columns) to the parts ``pc``
     (:func:`deviation_kernel`).
 
     On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
-    on a circle; an upper bound on a helix, whose tiny parts barely rise). Where no part rises (no
-    helix in the batch), the same distances without an angle per point: a point within the part's
+    on a circle; an upper bound on a helix, whose tiny parts barely rise): with ``helix`` (some part of the
+    batch rises). Else the same distances without an angle per point: a point within the part's
     angles (``u·m >= ρ cos α``, ``m`` the part's middle direction, ``α`` its half angle) is
     ``sqrt((ρ - r)² + z²)`` from it, any other is nearest the end on its side of ``m``.
     """
@@ -370,7 +380,7 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
     mid = (lo + hi) / 2
     r = pc["radius"][:, None]
 
-    def helix(_):
+    def rising():
         phi = jnp.arctan2(y, x)
         psi = jnp.clip(mid + jnp.mod(phi - mid + jnp.pi, 2 * jnp.pi) - jnp.pi, lo, hi)
         cos, sin = jnp.cos(psi), jnp.sin(psi)
@@ -382,7 +392,7 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
         ]
         return jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
-    def circle(_):
+    def circle():
         z = sum(rel[i] * pc["axis"][:, i, None] for i in range(3))
         rho = jnp.sqrt(x * x + y * y)
         mx, my, cos_half = jnp.cos(mid), jnp.sin(mid), jnp.cos((hi - lo) / 2)  # (J, 1): per part, not per point
@@ -392,12 +402,14 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict) -> jnp.ndarray:
         to_end = jnp.sqrt(d_end[0] * d_end[0] + d_end[1] * d_end[1] + d_end[2] * d_end[2])
         return jnp.where(within, jnp.sqrt((rho - r) ** 2 + z * z), to_end)
 
-    arc = jax.lax.cond(jnp.any(pc["is_arc"] & (pc["rise"] != 0)), helix, circle, None)
-    return jnp.where(pc["is_arc"][:, None], arc, seg)
+    return jnp.where(pc["is_arc"][:, None], rising() if helix else circle(), seg)
 
 
-def _deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
-    """:func:`deviation_kernel` before compilation."""
+def _deviation_kernel(
+    coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict, helix: tuple[bool, bool]
+) -> jnp.ndarray:
+    """:func:`deviation_kernel` before compilation; ``helix``: whether some part of ``piece_in``, of
+    ``piece_out`` rises (:func:`_piece_distance`)."""
     cx = [[coeffs[:, k, i][:, None] for k in range(6)] for i in range(3)]
     u = jnp.asarray(np.linspace(0.0, 1.0, N_DEVIATION))[None, :]
 
@@ -405,8 +417,8 @@ def _deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, p
         d = [_horner(cx[i], u, 3) for i in range(3)]
         p = [d[i][0] + start[:, i, None] for i in range(3)]
         return (
-            _piece_distance(p, piece_in),
-            _piece_distance(p, piece_out),
+            _piece_distance(p, piece_in, helix[0]),
+            _piece_distance(p, piece_out, helix[1]),
             _arc_excess(p, piece_in),
             _arc_excess(p, piece_out),
             [di[2] for di in d],
