@@ -241,6 +241,7 @@ def _deviation(
     n = i.size
     length = spans.length[i]
     dev = np.empty(n)
+    helix = bool(np.any(spans.arcs.rise != 0))  # one program for the whole path (deviation_kernel)
     for lo in range(0, n, DEVIATION_CHUNK):
         c = slice(lo, min(n, lo + DEVIATION_CHUNK))
         m = DEVIATION_CHUNK
@@ -249,7 +250,7 @@ def _deviation(
         piece_out = _pieces(spans, arrays, i[c] + 1, np.zeros(c.stop - lo), ell_b[c])
         pad = [pad_rows(x, m, 0) for x in (coeffs[c], start)]  # padding rows: a blend at rest at the origin
         piece_in, piece_out = ({k: pad_rows(v, m, 0) for k, v in pc.items()} for pc in (piece_in, piece_out))
-        dev[c] = np.asarray(deviation_kernel(*pad, piece_in, piece_out))[: c.stop - lo]
+        dev[c] = np.asarray(deviation_kernel(*pad, piece_in, piece_out, helix))[: c.stop - lo]
     return dev
 
 

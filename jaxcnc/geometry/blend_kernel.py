@@ -232,10 +232,14 @@ def _segment_distance_cols(p: list[jnp.ndarray], a: jnp.ndarray, b: jnp.ndarray)
 N_DEVIATION = 25
 
 
-def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict) -> jnp.ndarray:
+def deviation_kernel(
+    coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict, helix: bool | None = None
+) -> jnp.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound), compiled with
-    :func:`cpu_loop_options`, for arcs that rise (helices) only where a part given is one (the formulas of
-    :func:`_piece_distance`: one program each way).
+    :func:`cpu_loop_options`. ``helix``: whether a part may be an arc that rises (a helix; ``None``: whether one
+    given does) — a program with helices measures each side by the helix's or the circle's formulas as its parts
+    ask (:func:`_piece_distance`), one without them by the circle's alone, a smaller program. A caller that
+    knows its program sets it once for all its calls: one compiled program per run.
 
     ``coeffs`` ``(J, 6, 4)``: the blends' homogeneous power-basis coefficients (weights 1) relative to their
     start ``start`` ``(J, 3)``. ``piece_in``, ``piece_out``: each a dict of ``(J, ...)`` arrays: ``a``, ``b``
@@ -245,10 +249,11 @@ def deviation_kernel(coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, pi
     The bound holds between the ``N_DEVIATION`` samples too, however often the nearer piece changes
     (:func:`deviation_bound`).
     """
-    helix = tuple(
-        bool(np.any(np.asarray(pc["is_arc"]) & (np.asarray(pc["rise"]) != 0))) for pc in (piece_in, piece_out)
-    )
-    return _compiled(_deviation_kernel, "helix")(coeffs, start, piece_in, piece_out, helix=helix)
+    if helix is None:
+        helix = any(
+            bool(np.any(np.asarray(pc["is_arc"]) & (np.asarray(pc["rise"]) != 0))) for pc in (piece_in, piece_out)
+        )
+    return _compiled(_deviation_kernel, "helix")(coeffs, start, piece_in, piece_out, helix=bool(helix))
 
 
 #: Sub-intervals the interval with the largest bound is cut into and measured again (:func:`deviation_bound`),
@@ -367,8 +372,8 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict, helix: bool) -> jnp.ndarray:
     (:func:`deviation_kernel`).
 
     On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
-    on a circle; an upper bound on a helix, whose tiny parts barely rise): with ``helix`` (some part of the
-    batch rises). Else the same distances without an angle per point: a point within the part's
+    on a circle; an upper bound on a helix, whose tiny parts barely rise): where some part of ``pc`` rises (only
+    compiled with ``helix``). Else the same distances without an angle per point: a point within the part's
     angles (``u·m >= ρ cos α``, ``m`` the part's middle direction, ``α`` its half angle) is
     ``sqrt((ρ - r)² + z²)`` from it, any other is nearest the end on its side of ``m``.
     """
@@ -402,14 +407,17 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict, helix: bool) -> jnp.ndarray:
         to_end = jnp.sqrt(d_end[0] * d_end[0] + d_end[1] * d_end[1] + d_end[2] * d_end[2])
         return jnp.where(within, jnp.sqrt((rho - r) ** 2 + z * z), to_end)
 
-    return jnp.where(pc["is_arc"][:, None], rising() if helix else circle(), seg)
+    if helix:  # both forms compiled; each call's parts choose
+        arc = jax.lax.cond(jnp.any(pc["is_arc"] & (pc["rise"] != 0)), rising, circle)
+    else:
+        arc = circle()
+    return jnp.where(pc["is_arc"][:, None], arc, seg)
 
 
 def _deviation_kernel(
-    coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict, helix: tuple[bool, bool]
+    coeffs: jnp.ndarray, start: jnp.ndarray, piece_in: dict, piece_out: dict, helix: bool
 ) -> jnp.ndarray:
-    """:func:`deviation_kernel` before compilation; ``helix``: whether some part of ``piece_in``, of
-    ``piece_out`` rises (:func:`_piece_distance`)."""
+    """:func:`deviation_kernel` before compilation (``helix`` as it says)."""
     cx = [[coeffs[:, k, i][:, None] for k in range(6)] for i in range(3)]
     u = jnp.asarray(np.linspace(0.0, 1.0, N_DEVIATION))[None, :]
 
@@ -417,8 +425,8 @@ def _deviation_kernel(
         d = [_horner(cx[i], u, 3) for i in range(3)]
         p = [d[i][0] + start[:, i, None] for i in range(3)]
         return (
-            _piece_distance(p, piece_in, helix[0]),
-            _piece_distance(p, piece_out, helix[1]),
+            _piece_distance(p, piece_in, helix),
+            _piece_distance(p, piece_out, helix),
             _arc_excess(p, piece_in),
             _arc_excess(p, piece_out),
             [di[2] for di in d],
