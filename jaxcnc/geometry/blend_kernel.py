@@ -237,9 +237,9 @@ def deviation_kernel(
 ) -> jnp.ndarray:
     """``(J,)`` distance from each blend to the two pieces it replaces (an upper bound), compiled with
     :func:`cpu_loop_options`. ``helix``: whether a part may be an arc that rises (a helix; ``None``: whether one
-    given does) — a program with helices measures each side by the helix's or the circle's formulas as its parts
-    ask (:func:`_piece_distance`), one without them by the circle's alone, a smaller program. A caller that
-    knows its program sets it once for all its calls: one compiled program per run.
+    given does) — measured then by the helix's formulas (exact on circles too), else by the circle's alone, which
+    take no angle per point (:func:`_piece_distance`). A caller that knows its path sets it once for all its
+    calls: one compiled program per run.
 
     ``coeffs`` ``(J, 6, 4)``: the blends' homogeneous power-basis coefficients (weights 1) relative to their
     start ``start`` ``(J, 3)``. ``piece_in``, ``piece_out``: each a dict of ``(J, ...)`` arrays: ``a``, ``b``
@@ -372,8 +372,8 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict, helix: bool) -> jnp.ndarray:
     (:func:`deviation_kernel`).
 
     On an arc the nearest point of the part is at the query's own angle, clamped to the part (exact
-    on a circle; an upper bound on a helix, whose tiny parts barely rise): where some part of ``pc`` rises (only
-    compiled with ``helix``). Else the same distances without an angle per point: a point within the part's
+    on a circle; an upper bound on a helix, whose tiny parts barely rise): with ``helix``. Without, the same
+    distances on circles without an angle per point: a point within the part's
     angles (``u·m >= ρ cos α``, ``m`` the part's middle direction, ``α`` its half angle) is
     ``sqrt((ρ - r)² + z²)`` from it, any other is nearest the end on its side of ``m``.
     """
@@ -407,11 +407,7 @@ def _piece_distance(p: list[jnp.ndarray], pc: dict, helix: bool) -> jnp.ndarray:
         to_end = jnp.sqrt(d_end[0] * d_end[0] + d_end[1] * d_end[1] + d_end[2] * d_end[2])
         return jnp.where(within, jnp.sqrt((rho - r) ** 2 + z * z), to_end)
 
-    if helix:  # both forms compiled; each call's parts choose
-        arc = jax.lax.cond(jnp.any(pc["is_arc"] & (pc["rise"] != 0)), rising, circle)
-    else:
-        arc = circle()
-    return jnp.where(pc["is_arc"][:, None], arc, seg)
+    return jnp.where(pc["is_arc"][:, None], rising() if helix else circle(), seg)
 
 
 def _deviation_kernel(
