@@ -153,15 +153,17 @@ def _numeric_programs(draw) -> str:
 FIGURES = {"run": 0, "refused": 0, "accepted": 0}
 
 
-def _check_outcome(text: str) -> None:
+def check_outcome(text: str, figures: dict = FIGURES, **kw) -> None:
+    """``text`` (as ``f.ngc``, ``parse_gcode`` options ``kw``) ends in a located one-line error or a Program whose
+    values are finite; counted in ``figures`` (run, refused, accepted)."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         try:
-            p = parse_gcode(text, "f.ngc", max_lines=2000)
+            p = parse_gcode(text, "f.ngc", max_lines=2000, **kw)
         except SourceError as e:
             assert e.file == "f.ngc" and 1 <= e.line <= text.count("\n") + 1, str(e)
             assert "\n" not in str(e) and e.reason
-            FIGURES["refused"] += 1
+            figures["refused"] += 1
         else:
             for k in PROGRAM_COLUMNS:
                 col = getattr(p, k)
@@ -169,14 +171,14 @@ def _check_outcome(text: str) -> None:
                     assert np.all(np.isfinite(col)), (k, col)
             assert not np.any(np.isinf(p.feed)) and np.all(np.isnan(p.feed) | (p.feed > 0))
             assert not np.any(np.isnan(p.blend_tol))
-            FIGURES["accepted"] += 1
-    FIGURES["run"] += 1
+            figures["accepted"] += 1
+    figures["run"] += 1
 
 
 @settings(max_examples=1000, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(_numeric_programs())
 def _fuzz(text):
-    _check_outcome(text)
+    check_outcome(text)
     assert_paths_agree(text)
 
 

@@ -4,16 +4,11 @@ the line-by-line interpreter (docs/gcode.md, "Words"; issue 13, Deliver 5)."""
 
 from __future__ import annotations
 
-import warnings
-
-import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from jaxcnc.errors import SourceError
-from jaxcnc.gcode import parse_gcode
-from jaxcnc.program import PROGRAM_COLUMNS
 from tests.test_gcode_fastpath import assert_paths_agree
+from tests.test_gcode_fuzz import check_outcome
 
 #: The machine file's tool table as :func:`parse_gcode` takes it: tool -> (z_mm, x_mm, y_mm).
 TOOLS = {1: (2.0, 0.0, 0.0), 2: (5.5, 0.1, -0.2), 99999: (-1.0, 0.0, 0.0)}
@@ -71,29 +66,11 @@ def _post_programs(draw) -> tuple[str, str]:
 FIGURES = {"run": 0, "refused": 0, "accepted": 0}
 
 
-def _check(text: str, dialect: str) -> None:
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        try:
-            p = parse_gcode(text, "f.ngc", dialect=dialect, tools=TOOLS, max_lines=2000)
-        except SourceError as e:
-            assert e.file == "f.ngc" and 1 <= e.line <= text.count("\n") + 1, str(e)
-            assert "\n" not in str(e) and e.reason
-            FIGURES["refused"] += 1
-        else:
-            for k in PROGRAM_COLUMNS:
-                col = getattr(p, k)
-                if col.dtype.kind == "f" and k not in ("feed", "center", "blend_tol"):
-                    assert np.all(np.isfinite(col)), (k, col)
-            FIGURES["accepted"] += 1
-    FIGURES["run"] += 1
-
-
 @settings(max_examples=600, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(_post_programs())
 def _fuzz(case):
     text, dialect = case
-    _check(text, dialect)
+    check_outcome(text, FIGURES, dialect=dialect, tools=TOOLS)
     assert_paths_agree(text, dialect=dialect, tools=TOOLS)
 
 
