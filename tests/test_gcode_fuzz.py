@@ -185,14 +185,19 @@ def _fuzz(text):
 def test_fuzz_numeric_grammar():
     """Huge, NaN-, inf-giving and non-ASCII numbers in words and expressions: a located error or a finite Program,
     the same on both paths. Prints the figures (cases run, refused, accepted)."""
-    for k in FIGURES:
-        FIGURES[k] = 0
-    _fuzz()
-    f = FIGURES
-    print(f"\nnumeric grammar fuzz: {f['run']} cases, {f['refused']} refused, {f['accepted']} accepted")
-    assert FIGURES["run"] >= 900
+    f = run_counted(_fuzz, FIGURES, "numeric grammar fuzz")
+    assert f["run"] >= 900
     # the generator must exercise both outcomes, else the property says little
-    assert FIGURES["refused"] >= 100 and FIGURES["accepted"] >= 50, FIGURES
+    assert f["refused"] >= 100 and f["accepted"] >= 50, f
+
+
+def run_counted(fuzz, figures: dict, name: str) -> dict:
+    """Run the hypothesis test ``fuzz`` with ``figures`` zeroed; print and return them."""
+    for k in figures:
+        figures[k] = 0
+    fuzz()
+    print(f"\n{name}: {figures['run']} cases, {figures['refused']} refused, {figures['accepted']} accepted")
+    return figures
 
 
 # ---- the command line -------------------------------------------------------------------------------------------

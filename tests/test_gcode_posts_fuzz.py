@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.test_gcode_fastpath import assert_paths_agree
-from tests.test_gcode_fuzz import check_outcome
+from tests.test_gcode_fuzz import check_outcome, run_counted
 
 #: The machine file's tool table as :func:`parse_gcode` takes it: tool -> (z_mm, x_mm, y_mm).
 TOOLS = {1: (2.0, 0.0, 0.0), 2: (5.5, 0.1, -0.2), 99999: (-1.0, 0.0, 0.0)}
@@ -78,11 +78,7 @@ def test_fuzz_post_words_in_every_dialect():
     """Tool offsets (G43 H / G43 / G43.1 / G43.2 / G49, H0, missing and malformed tools), program numbers and
     names, Sinumerik T D edges and header G codes, mixed with motion, G92, G53 and G28, in each dialect: a
     located error or a finite Program, the same on both paths. Prints the figures (cases, refused, accepted)."""
-    for k in FIGURES:
-        FIGURES[k] = 0
-    _fuzz()
-    f = FIGURES
-    print(f"\npost words fuzz: {f['run']} cases, {f['refused']} refused, {f['accepted']} accepted")
+    f = run_counted(_fuzz, FIGURES, "post words fuzz")
     assert f["run"] >= 500
     # both outcomes must be exercised, else the property says little
     assert f["refused"] >= 100 and f["accepted"] >= 100, f
