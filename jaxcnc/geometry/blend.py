@@ -42,9 +42,9 @@ from jaxcnc.geometry import poly
 from jaxcnc.geometry.bezier import homogeneous_power, power_to_bezier, restrict
 from jaxcnc.geometry.blend_kernel import blend_kernel, deviation_kernel
 from jaxcnc.geometry.evaluate import evaluate_path, junction_curvatures, span_arrays
-from jaxcnc.geometry.kinds import SpanKind
+from jaxcnc.geometry.kinds import SpanKind, kind_in
 from jaxcnc.geometry.spans import MIN_LENGTH_MM, SPAN_FIELDS, ArcTable, PolyTable, Spans, assemble, merge_polys
-from jaxcnc.jitcache import compile_ahead
+from jaxcnc.jitcache import warm_ahead
 from jaxcnc.program import LaserMode, Program
 
 BLEND_DEGREE = 5
@@ -72,7 +72,7 @@ def junction_tolerances(
         return np.zeros(0)
     k1, k2 = spans.kind[:-1], spans.kind[1:]
     r1, r2 = spans.block[:-1], spans.block[1:]
-    blendable = np.isin(k1, (SpanKind.LINE, SpanKind.ARC)) & np.isin(k2, (SpanKind.LINE, SpanKind.ARC))
+    blendable = kind_in(k1, (SpanKind.LINE, SpanKind.ARC)) & kind_in(k2, (SpanKind.LINE, SpanKind.ARC))
     lit = (program.laser != LaserMode.OFF) & ~program.rapid
     same_beam = np.where(
         lit[r1] & lit[r2],
@@ -369,7 +369,7 @@ def blend_path(
     # kernel: the two longest compiles of a first run, side by side on two cores
     first = _kernel_rows(j.size)
     kernel_ahead = (
-        compile_ahead(blend_kernel, np.broadcast_to(_UNIT_BLEND, (first, 6, 3)), np.zeros((first, 3)))
+        warm_ahead(blend_kernel, np.broadcast_to(_UNIT_BLEND, (first, 6, 3)), np.zeros((first, 3)))
         if check.size
         else None
     )

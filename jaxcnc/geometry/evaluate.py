@@ -26,7 +26,7 @@ from types import ModuleType
 import numpy as np
 
 from jaxcnc.buckets import bucket_size
-from jaxcnc.geometry.kinds import POLY_KINDS, SpanKind
+from jaxcnc.geometry.kinds import POLY_KINDS, SpanKind, kind_in
 
 
 def span_arrays(spans, xp: ModuleType = np) -> dict:
@@ -74,7 +74,7 @@ def window_span_arrays(spans, first: int, last: int, rows: int, table_rows: int 
     n = last - first
     kind, item = spans.kind[first:last], spans.item[first:last]
     is_arc = (kind == SpanKind.ARC) & (item >= 0)
-    is_poly = np.isin(kind, POLY_KINDS) & (item >= 0)  # (as spans._own_tables renumbers them)
+    is_poly = kind_in(kind, POLY_KINDS) & (item >= 0)  # (as spans._own_tables renumbers them)
     arc_rows, poly_rows = item[is_arc], item[is_poly]
     out_item = np.full(rows, -1, item.dtype)
     out_item[:n] = item

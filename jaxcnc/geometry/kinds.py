@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from enum import IntEnum
 
+import numpy as np
+
 
 class SpanKind(IntEnum):
     """The kind of a span; the evaluation and the planner's grid treat each in closed form."""
@@ -19,3 +21,12 @@ class SpanKind(IntEnum):
 POLY_KINDS = (SpanKind.CURVE, SpanKind.BLEND)
 #: Kinds with curvature (the planner cuts them into intervals).
 CURVED_KINDS = (SpanKind.ARC, SpanKind.CURVE, SpanKind.BLEND)
+
+
+def kind_in(kind: np.ndarray, kinds: tuple[SpanKind, ...]) -> np.ndarray:
+    """``(n,)`` bool: ``kind`` ``(n,)`` is one of ``kinds`` — ``np.isin`` for a few kinds as one comparison each
+    (``np.isin`` sorts: 7 ms against ~0.05 ms on a 520k-interval grid's kinds)."""
+    out = kind == kinds[0]
+    for k in kinds[1:]:
+        out |= kind == k
+    return out

@@ -26,7 +26,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
-from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind
+from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind, kind_in
 from jaxcnc.program import Kind, Program
 
 __all__ = ["ArcTable", "PolyTable", "SpanKind", "Spans", "program_spans", "CURVED_KINDS", "POLY_KINDS"]
@@ -165,7 +165,7 @@ class Spans:
     @property
     def curved(self) -> np.ndarray:
         """``(n,)`` bool: the span has curvature (arc, curve piece, blend)."""
-        return np.isin(self.kind, CURVED_KINDS)
+        return kind_in(self.kind, CURVED_KINDS)
 
 
 SPAN_FIELDS = tuple(f.name for f in fields(Spans) if f.name not in ("arcs", "polys"))
@@ -501,7 +501,7 @@ def _own_tables(spans: Spans, out: dict[str, np.ndarray]) -> Spans:
     kind, item = out["kind"], out["item"].copy()
     arcs, polys = spans.arcs, spans.polys
     is_arc = (kind == SpanKind.ARC) & (item >= 0)
-    is_poly = np.isin(kind, POLY_KINDS) & (item >= 0)
+    is_poly = kind_in(kind, POLY_KINDS) & (item >= 0)
     arc_rows, poly_rows = item[is_arc], item[is_poly]
     item[is_arc] = np.arange(arc_rows.size)
     item[is_poly] = np.arange(poly_rows.size)

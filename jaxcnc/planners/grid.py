@@ -33,7 +33,7 @@ import numpy as np
 
 from jaxcnc.buckets import bucket_size
 from jaxcnc.geometry.evaluate import arc_trig, evaluate_path, window_span_arrays
-from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind
+from jaxcnc.geometry.kinds import CURVED_KINDS, SpanKind, kind_in
 from jaxcnc.geometry.spans import Spans
 from jaxcnc.jaxconfig import on_cpu  # (and float64)
 from jaxcnc.jitcache import cached_jit
@@ -110,7 +110,7 @@ def aligned_array(shape: int | tuple[int, ...], dtype=np.float64, zeros: bool = 
 
 def is_curved(kind: np.ndarray) -> np.ndarray:
     """``(n,)`` bool: the span kind has curvature (arc, NURBS piece or blend)."""
-    return np.isin(kind, CURVED_KINDS)
+    return kind_in(kind, CURVED_KINDS)
 
 
 def interval_counts(spans: Spans) -> np.ndarray:
