@@ -22,6 +22,7 @@ from jaxcnc.planners.smoothing import (
     NARROW_ROUNDS,
     SmoothPlan,
     blends_slower_than_stops,
+    held_feed,
     narrow_windows,
     passed_speed,
     segment_groups,
@@ -502,3 +503,36 @@ def test_rest_to_rest_groups_of_two_plans_are_spliced_into_one():
         np.testing.assert_allclose(
             out.s_at(out.g_new_start[g] + ticks), plans[c].s_at(plans[c].g_new_start[g] + ticks), rtol=0, atol=1e-9
         )
+
+
+def test_held_feed_caps_every_span_a_hold_reaches():
+    """:func:`held_feed`: a hold caps the feed of each span it overlaps (spans that only touch it keep theirs), the
+    lowest of the holds that reach a span wins, and a hold of no length caps nothing."""
+    spans = build_spans(parse_gcode("G1 X10 F600\nG1 X20\nG1 X30\nG1 X40\nM2\n", "h.ngc"), 0.0)
+    feed = np.full(len(spans), 100.0)
+    holds = np.array([[12.0, 18.0, 5.0], [15.0, 25.0, 7.0], [30.0, 30.0, 1.0], [39.0, 45.0, 2.0]])
+    # (the fifth span: the program's end, a point at 40 mm inside the last hold)
+    np.testing.assert_array_equal(held_feed(spans, spans.s0, feed, holds), [100.0, 5.0, 7.0, 2.0, 2.0])
+    np.testing.assert_array_equal(held_feed(spans, spans.s0, feed, np.zeros((0, 3))), feed)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not PEERS.is_dir(), reason="../shared/peers absent")
+def test_a_planner_without_holds_plans_alike_at_any_tick_rate(tmp_path):
+    """``lookahead`` (which does not honour the stage's holds) under j_max 1e6 on meander520's first 120 lines, the
+    peers' 1 and 10 kHz machines: the stage's search ended on the global slow-down, whose steps fell otherwise at the
+    two rates (67.70 s at 1 kHz, 69.20 s at 10 kHz: 2.2 % apart, until 2026-11-29); the search again with the holds
+    as caps on whole spans (held_feed) plans it to 22.21 / 22.26 s. Every table within every limit at every tick."""
+    lines = (PEERS / "programs" / "meander520.ngc").read_text().splitlines()[:120]
+    program = parse_gcode("\n".join(lines) + "\nM2\n", "meander520_head.ngc")
+    times = {}
+    for hz in (1000, 10000):
+        text = (PEERS / "machines" / f"m{hz}_t0.01.toml").read_text()
+        text = re.sub(r"(?m)^(a_max = .*)$", r"\1\nj_max = 1.0e6", text)
+        text = re.sub(r"(?m)^\[machine\]$", '[machine]\nplanner = "lookahead"', text)
+        job, _, meas = table_of_program(program, parse_machine(text, f"m{hz}_t0.01_j.toml"), tmp_path)
+        assert meas.ok, meas.violations[:3]
+        assert job.planner == "lookahead"
+        times[hz] = job.plan.total_time_s
+    assert abs(times[10000] / times[1000] - 1) <= 0.01, times
+    assert max(times.values()) < 30.0, times  # not slowed down as a whole (67.7 s before)

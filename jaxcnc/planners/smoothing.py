@@ -611,7 +611,10 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     feed cap from the speed measured there and the excess (a long curve whose worst jerk lies at one of its ends is
     held there instead, :func:`_end_excess`); acceleration excess scales the acceleration down. If that stalls, the
     places that still break a limit are slowed down alone (``SQUEEZE_ROUNDS``), then a global slow-down ends the
-    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`. Each rest-to-rest group of the valid plan
+    search with a valid plan, or a :class:`~jaxcnc.errors.PlanningError`. A planner that does not honour holds skips
+    the local slow-down; where its search ends on the global one, the search runs again with the holds as caps on
+    whole spans' feeds (:func:`held_feed`) and the faster valid plan of the two is kept. Each rest-to-rest group of
+    the valid plan
     then takes the fastest motion any attempt measured within the limits for it (:func:`splice_groups`: the later
     rounds' remedies serve the groups that still broke one), and its window is narrowed where the limits still hold
     (:func:`narrow_windows`).
@@ -620,6 +623,48 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
     on the table's ticks; and the search's windows are whole multiples of ``WINDOW_STEP_S`` at any rate, so a 1 kHz
     and a 10 kHz table of the same program take the same path through it and plan to the same time.
     """
+    if planner.honours_holds:
+        return _jerk_search(request, planner, iterations, by_span=False)[0]
+    first, error = None, None
+    try:
+        first, fell_back = _jerk_search(request, planner, iterations, by_span=False)
+    except PlanningError as exc:
+        error, fell_back = exc, True
+    if not fell_back:
+        return first
+    # a planner that cannot honour holds ended on the global slow-down, whose steps fall otherwise at other tick rates
+    # (meander520, j_max 1e6: 133.85 s at 1 kHz, 129.99 s at 10 kHz): the search again with the holds as caps on whole
+    # spans (held_feed, which any planner honours) — local slow-downs, the same at any rate (91.22 / 91.30 s) but
+    # slower than the global one on other programs (plasmatest 65.8 against 59.8 s) — and the faster of the two
+    try:
+        second, _ = _jerk_search(request, planner, iterations, by_span=True)
+    except PlanningError:
+        if first is None:
+            raise error from None
+        return first
+    return second if first is None or second.total_time_s < first.total_time_s else first
+
+
+def held_feed(spans: Spans, span_s0: np.ndarray, feed: np.ndarray, holds: np.ndarray) -> np.ndarray:
+    """``(n,)`` each span's feed ``feed`` capped by the held speeds ``holds`` (rows ``s_lo, s_hi, v``) that reach it:
+    for a planner whose caps are constant along a span (``honours_holds`` false), a hold caps the whole span (a hold
+    of no length, none). ``span_s0``: ``(n,)`` where each span starts along the path."""
+    rows = np.asarray(holds, dtype=np.float64).reshape(-1, 3)
+    s1 = span_s0 + spans.length
+    first = np.searchsorted(s1, rows[:, 0], side="right")  # the first span ending past s_lo
+    count = np.maximum(np.searchsorted(span_s0, rows[:, 1], side="left") - first, 0)  # ... to the last before s_hi
+    which = np.repeat(np.arange(rows.shape[0]), count)
+    span = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + first[which]
+    cap = np.full(feed.size, np.inf)
+    np.minimum.at(cap, span, rows[which, 2])
+    return np.minimum(feed, cap)
+
+
+def _jerk_search(request: PlanRequest, planner: Planner, iterations: int, by_span: bool) -> tuple[SmoothPlan, bool]:
+    """:func:`jerk_limited`'s search and whether it ended on the global slow-down. ``by_span``: a planner that does
+    not honour holds is handed them as caps on whole spans' feeds (:func:`held_feed`) and searched as one that does.
+    """
+    honours = planner.honours_holds or by_span
     margin = MEASURE_MARGIN
     f = request.machine.tick_hz
     substeps = jerk_substeps(f)
@@ -631,7 +676,10 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
 
     def attempt(feed: np.ndarray, alpha: float, holds, stretch: float) -> tuple[SmoothPlan, np.ndarray, ...]:
         a = a_max * alpha
-        holds = holds if planner.honours_holds else None
+        if by_span and holds is not None:
+            feed, holds = held_feed(spans, span_s0, feed, holds), None
+        elif not planner.honours_holds:
+            holds = None
         # the speed keeps the margin too: s_W is a difference of two integrals ∫ s dt over a group, whose rounding
         # (~ulp(length x duration) / W) reads a cruise at v_max up to ~1e-9 above it at 10 kHz, beyond the check's slack
         limits = dict(v_max=with_margin(v_max), a_max=with_margin(a))
@@ -707,7 +755,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             *(it, excess_a, excess_j, int((worst[1] > margin).sum()), alpha, sp.window_ticks, sp.total_time_s),
         )
         if max(excess_a, excess_j) <= margin:
-            return narrowed(fastest(sp))
+            return narrowed(fastest(sp)), False
         if not widening:
             if excess_j < 0.98 * best_j:
                 best_j, stalled = excess_j, 0
@@ -747,7 +795,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
         )
         curved = curved[(curved >= 0) & (curved < len(spans))]
         curved = curved[is_curve[curved]]
-        if planner.honours_holds and curved.size:
+        if honours and curved.size:
             # a long curve whose excess lies at one of its ends (a junction: a tiny circle's curvature step beside it)
             # is held down there alone, not slowed down as a whole (a 21 mm arc was taken at 1.7 mm/s for it)
             ends, curved = _end_excess(curved, spans, span_s0, worst[1], where, sp.window_ticks / f, margin)
@@ -765,7 +813,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                 np.minimum.at(cap, idx, np.maximum(speed[curved], 1e-3) * factor)
             cap[spans.kind == SpanKind.LINE] = np.inf  # a line next to a curve keeps its cruise
             feed = np.minimum(feed, cap)
-    if planner.honours_holds and holds is not None:
+    if honours and holds is not None:
         # stalled: before the whole program, slow down where a limit still breaks and only there (the spans and two
         # on either side, and a window around each worst jerk), a share SQUEEZE at a time
         for _ in range(SQUEEZE_ROUNDS):
@@ -781,7 +829,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
             sp, worst, speed, where = attempt(feed, alpha, holds, stretch)
             log.debug("jerk squeeze: v/a %.4f, j %.4f, %.4f s", worst[0].max(), worst[1].max(), sp.total_time_s)
             if worst.max() <= margin:
-                return narrowed(fastest(sp))
+                return narrowed(fastest(sp)), False
     best = None  # fall back: the whole program slower (jerk falls like v³ on curves, v² A on lines)
     for use_holds in (holds, None):
         a_fb, feed_fb, speed_fb = alpha, feed, speed
@@ -794,7 +842,7 @@ def jerk_limited(request: PlanRequest, planner: Planner, iterations: int = 30) -
                     best = sp
                 break
     if best is not None:
-        return narrowed(fastest(best))
+        return narrowed(fastest(best)), True
     raise PlanningError(
         f"{request.machine.source}: no plan keeps the jerk limits j_max = {j_max} mm/s³ "
         "(is j_max tiny against a_max and the tick rate?)"
