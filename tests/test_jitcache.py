@@ -245,3 +245,24 @@ def test_every_job_starts_by_releasing_programs_when_crowded(monkeypatch, share,
     monkeypatch.setattr(jitcache, "CROWDED_SHARE", share)
     plan_text("G1 X1 F600\n", make_machine())
     assert (_poly.jitted._cache_size() == 0) == released
+
+
+def test_a_warm_up_runs_once_per_call_and_a_compile_ahead_every_time():
+    """:func:`~jaxcnc.jitcache.warm_ahead` runs a call in the compile-ahead thread the first time this process makes
+    it and never again (its result is nobody's: the blends' kernel warmed on made-up blends ran again in every plan
+    until 2026-11-29); :func:`~jaxcnc.jitcache.compile_ahead` returns the result every time (computed here once
+    seen)."""
+    ran = []
+
+    def fn(x):
+        ran.append(x.shape)
+        return x + 1.0
+
+    first = jitcache.warm_ahead(fn, np.zeros(7))
+    assert first is not None and float(first.result()[0]) == 1.0
+    assert jitcache.warm_ahead(fn, np.ones(7)) is None  # the same shapes: nothing run
+    assert ran == [(7,)]
+    again = jitcache.warm_ahead(fn, np.zeros(8))  # other shapes: a first call again
+    assert again is not None and again.result().shape == (8,) and ran == [(7,), (8,)]
+    assert float(jitcache.compile_ahead(fn, np.full(7, 2.0)).result()[0]) == 3.0  # seen: run here, result returned
+    assert ran == [(7,), (8,), (7,)]
