@@ -183,3 +183,44 @@ def test_polynomial_spans_meet_their_neighbours_with_unit_speed_and_curvature():
         for d1, d2 in ((end[1][poly], end[2][poly]), (start[1][poly], start[2][poly])):
             np.testing.assert_allclose(np.sum(d1 * d2, axis=1), 0.0, atol=1e-9 * max(1.0, np.abs(d2).max()))
         np.testing.assert_allclose(end[2][poly], start[2][poly], atol=1e-9 * max(1.0, np.abs(end[2]).max()))
+
+
+def _spans_by_sort(program):
+    """:func:`program_spans` as it is made where curve rows take part: the parts sorted into row order."""
+    from jaxcnc.geometry.spans import MIN_LENGTH_MM, arc_fields, concat_spans, line_fields, point_fields, row_norm
+    from jaxcnc.program import Kind
+
+    kind = program.kind
+    rows_line = np.flatnonzero((kind == Kind.LINE) & (row_norm(program.end - program.start) > MIN_LENGTH_MM))
+    rows_arc = np.flatnonzero(kind == Kind.ARC)
+    rows_pt = np.flatnonzero((kind == Kind.DWELL) | (kind == Kind.EVENT))
+    parts = [(line_fields(program.start[rows_line], program.end[rows_line], rows_line), None)]
+    if rows_arc.size:
+        parts.append(arc_fields(program, rows_arc))
+    parts.append((point_fields(program.end[rows_pt], rows_pt), None))
+    return concat_spans(parts, np.concatenate([f["block"] for f, _ in parts]))
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G1 X1 F600\nG2 X2 Y1 I0.5 J0.5\nG1 X2\nG4 P0.5\nM3 S100\nG3 X0 Y1 I-1 J0\nG1 X0 Y0 Z1\nM5\nM2\n",
+        "G1 X1 F600\nG1 X2\nM2\n",
+        "G4 P1\nM2\n",
+    ],
+)
+def test_spans_of_rows_without_curves_are_those_of_the_sorted_parts(text):
+    """A program without curve rows takes each kept row as one span in row order (no sort, no scatter of the line
+    fields: :func:`~jaxcnc.geometry.spans.program_spans`): the same spans, bit for bit and dtype for dtype, as the
+    parts sorted into row order — lines, arcs, helices, zero-length moves (no span), dwells and events."""
+    from jaxcnc.geometry.spans import SPAN_FIELDS, program_spans
+
+    program = parse_gcode(text, "rows.ngc")
+    fast, ref = program_spans(program), _spans_by_sort(program)
+    for key in SPAN_FIELDS:
+        a, b = getattr(fast, key), getattr(ref, key)
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint8), b.view(np.uint8)), key
+        assert not a.flags.writeable
+    assert not np.shares_memory(fast.tangent_in, fast.tangent_out)
+    for name in ("center", "e1", "e2", "axis", "radius", "rise", "sweep"):
+        np.testing.assert_array_equal(getattr(fast.arcs, name), getattr(ref.arcs, name))

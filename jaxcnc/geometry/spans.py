@@ -457,19 +457,53 @@ def program_spans(program: Program) -> Spans:
     kind = program.kind
     move_len = row_norm(program.end - program.start)
     rows_line = np.flatnonzero((kind == Kind.LINE) & (move_len > MIN_LENGTH_MM))
+    rows_arc = np.flatnonzero(kind == Kind.ARC)
+    rows_pt = np.flatnonzero((kind == Kind.DWELL) | (kind == Kind.EVENT))
+    rows_curve = np.flatnonzero(kind == Kind.CURVE)
+    if rows_curve.size == 0:
+        return _one_span_per_row(program, rows_line, rows_arc, rows_pt)
     parts: list[tuple[dict, ArcTable | PolyTable | None]] = [
         (line_fields(program.start[rows_line], program.end[rows_line], rows_line), None)
     ]
-    rows_arc = np.flatnonzero(kind == Kind.ARC)
     if rows_arc.size:
         parts.append(arc_fields(program, rows_arc))
-    rows_pt = np.flatnonzero((kind == Kind.DWELL) | (kind == Kind.EVENT))
     parts.append((point_fields(program.end[rows_pt], rows_pt), None))
-    rows_curve = np.flatnonzero(kind == Kind.CURVE)
-    if rows_curve.size:
-        parts.append(_curve_parts(program, rows_curve))
+    parts.append(_curve_parts(program, rows_curve))
     # path order: by program row; the pieces of one curve row stay in order (the sort is stable)
     return concat_spans(parts, np.concatenate([f["block"] for f, _ in parts]))
+
+
+def _one_span_per_row(program: Program, rows_line: np.ndarray, rows_arc: np.ndarray, rows_pt: np.ndarray) -> Spans:
+    """:func:`program_spans` of a program without curve rows: each kept row (``rows_line``, ``rows_arc``, ``rows_pt``)
+    one span, in row order. The spans :func:`concat_spans` makes of those parts, without its sort and its scatter
+    of every field: the line fields made for every kept row in place (the same formulas row for row, so the same
+    bits), the arcs' and the points' written over theirs. The CAM contour's 1 M rows (20k arcs): 182-186 → 126-136 ms
+    CPU (100k: 20-22 → 12 ms)."""
+    keep = np.zeros(len(program), bool)
+    for rows in (rows_line, rows_arc, rows_pt):
+        keep[rows] = True
+    rows = np.flatnonzero(keep)
+    pos = np.cumsum(keep) - 1  # program row -> its span
+    del keep
+    out = line_fields(program.start[rows], program.end[rows], rows)
+    out["item"] = np.full(rows.size, -1)
+    out["tangent_out"] = out["tangent_out"].copy()  # (line_fields shares one array for both)
+    arc_table = empty_arcs()
+    others = [(pos[rows_pt], point_fields(program.end[rows_pt], rows_pt))]
+    if rows_arc.size:
+        fields_, arc_table = arc_fields(program, rows_arc)
+        fields_["item"] = np.arange(rows_arc.size)
+        others.append((pos[rows_arc], fields_))
+    spans = {}
+    for key in SPAN_FIELDS:
+        a = out.pop(key)
+        a = a.astype(_FIELD_DTYPES.get(key, a.dtype), copy=False) if key in _FIELD_DTYPES else a
+        for at, fields_ in others:
+            if key in fields_:  # (a point's item is the lines' -1)
+                a[at] = fields_.pop(key)
+        a.setflags(write=False)
+        spans[key] = a
+    return Spans(**spans, arcs=arc_table, polys=merge_polys([]))
 
 
 def pad_spans(spans: Spans, n: int) -> Spans:
