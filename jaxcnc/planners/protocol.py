@@ -100,7 +100,8 @@ def coordinate_extent_mm(spans: Spans) -> float:
     The spans' extents (``lo``, ``hi``) and, for arcs, ``|centre| + radius`` (the centre of a large arc
     may lie far outside the part).
     """
-    extent = max(float(np.max(np.abs(spans.lo), initial=0.0)), float(np.max(np.abs(spans.hi), initial=0.0)))
+    # max |x| as the larger of |max x| and |min x| (each with 0): the same value, without the (n, 3) magnitudes
+    extent = max(0.0, *(abs(float(f(a, initial=0.0))) for a in (spans.lo, spans.hi) for f in (np.max, np.min)))
     arcs = spans.arcs
     if len(arcs):
         extent = max(extent, float(np.max(np.abs(arcs.center).max(axis=1) + np.abs(arcs.radius))))
