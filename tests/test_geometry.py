@@ -224,3 +224,40 @@ def test_spans_of_rows_without_curves_are_those_of_the_sorted_parts(text):
     assert not np.shares_memory(fast.tangent_in, fast.tangent_out)
     for name in ("center", "e1", "e2", "axis", "radius", "rise", "sweep"):
         np.testing.assert_array_equal(getattr(fast.arcs, name), getattr(ref.arcs, name))
+
+
+@st.composite
+def _row_programs(draw):
+    """G-code of lines (some of no length), arcs and helices (ends on their circles), dwells and laser events."""
+    x = y = z = 0.0
+    lines = ["G21 G90 G17 F600"]
+    for _ in range(draw(st.integers(1, 25))):
+        what = draw(st.sampled_from(["line", "still", "arc", "dwell", "event"]))
+        if what == "line":
+            x, y, z = (round(draw(st.floats(-50, 50)), 3) for _ in range(3))
+            lines.append(f"G1 X{x} Y{y} Z{z}")
+        elif what == "still":
+            lines.append(f"G1 X{x} Y{y}")
+        elif what == "arc":
+            i, j = (round(draw(st.floats(-5, 5)), 3) for _ in range(2))
+            r = float(np.hypot(i, j))
+            if r < 0.01:
+                continue
+            a = draw(st.floats(0, 2 * np.pi))
+            cx, cy = x + i, y + j
+            x, y = round(cx + r * np.cos(a), 6), round(cy + r * np.sin(a), 6)
+            dz = round(draw(st.sampled_from([0.0, 0.5])), 3)
+            z = round(z + dz, 3)
+            lines.append(f"G{draw(st.sampled_from([2, 3]))} X{x} Y{y} Z{z} I{i} J{j}")
+        elif what == "dwell":
+            lines.append("G4 P0.1")
+        else:
+            lines.append(draw(st.sampled_from(["M3 S100", "M5"])))
+    return "\n".join(lines) + "\nM2\n"
+
+
+@settings(max_examples=60, deadline=None)
+@given(_row_programs())
+def test_spans_of_random_rows_are_those_of_the_sorted_parts(text):
+    """:func:`test_spans_of_rows_without_curves_are_those_of_the_sorted_parts` on random programs."""
+    test_spans_of_rows_without_curves_are_those_of_the_sorted_parts(text)

@@ -483,7 +483,7 @@ def _one_span_per_row(
     one span, in row order (``move_len``: each row's ``row_norm(end - start)``). The spans :func:`concat_spans`
     makes of those parts, without its sort and its scatter of every field: the line fields made for every kept row
     in place (the same formulas row for row, so the same bits), the arcs' and the points' written over theirs. The
-    CAM contour's 1 M rows (20k arcs): 182-186 → 126-136 ms CPU (100k: 20-22 → 12 ms)."""
+    CAM contour's 1 M rows (20k arcs): 182-186 → 122-136 ms CPU (100k: 20-22 → 12 ms)."""
     keep = np.zeros(len(program), bool)
     for rows in (rows_line, rows_arc, rows_pt):
         keep[rows] = True
