@@ -502,7 +502,8 @@ def _one_span_per_row(
     spans = {}
     for key in SPAN_FIELDS:
         a = out.pop(key)
-        a = a.astype(_FIELD_DTYPES.get(key, a.dtype), copy=False) if key in _FIELD_DTYPES else a
+        if key in _FIELD_DTYPES:
+            a = a.astype(_FIELD_DTYPES[key], copy=False)
         for at, fields_ in others:
             if key in fields_:  # (a point's item is the lines' -1)
                 a[at] = fields_.pop(key)

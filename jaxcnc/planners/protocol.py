@@ -89,6 +89,13 @@ def step_rate_hz(request: PlanRequest) -> float:
 POSITION_ULPS = 8
 
 
+def hold_ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Range ``k`` is ``lo[k] .. lo[k] + count[k] - 1`` (the spans or nodes a row of ``hold_caps`` reaches):
+    ``(which, index)`` over all of them, flattened."""
+    which = np.repeat(np.arange(lo.size), count)
+    return which, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
+
+
 def with_margin(limit):
     """``limit`` (a number or an array) reduced by :data:`NUMERIC_MARGIN`: what a planner may reach."""
     return limit * (1.0 - NUMERIC_MARGIN)

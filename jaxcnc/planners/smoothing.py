@@ -51,6 +51,7 @@ from jaxcnc.planners.protocol import (
     Planner,
     PlanRequest,
     TimeLaw,
+    hold_ranges,
     jerk_substeps,
     machine_limits,
     with_margin,
@@ -653,8 +654,7 @@ def held_feed(spans: Spans, span_s0: np.ndarray, feed: np.ndarray, holds: np.nda
     s1 = span_s0 + spans.length
     first = np.searchsorted(s1, rows[:, 0], side="right")  # the first span ending past s_lo
     count = np.maximum(np.searchsorted(span_s0, rows[:, 1], side="left") - first, 0)  # ... to the last before s_hi
-    which = np.repeat(np.arange(rows.shape[0]), count)
-    span = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + first[which]
+    which, span = hold_ranges(first, count)
     cap = np.full(feed.size, np.inf)
     np.minimum.at(cap, span, rows[which, 2])
     return np.minimum(feed, cap)

@@ -65,7 +65,7 @@ from jaxcnc.planners.phaseplane import (
     static_cap,
     window_pieces,
 )
-from jaxcnc.planners.protocol import Planner, PlanRequest, jerk_limits, step_rate_hz
+from jaxcnc.planners.protocol import Planner, PlanRequest, hold_ranges, jerk_limits, step_rate_hz
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import (
     RAMP_COLUMNS,
@@ -1262,7 +1262,7 @@ def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
     rows = np.asarray(req.hold_caps, dtype=np.float64)
     first = np.clip(np.searchsorted(span_s0, rows[:, 0], side="right") - 1, 0, len(spans) - 1)
     last = np.clip(np.searchsorted(span_s0, rows[:, 1], side="right") - 1, 0, len(spans) - 1)
-    which, span = _ranges(first, last - first + 1)
+    which, span = hold_ranges(first, last - first + 1)
     width = np.full(len(spans), np.inf)
     np.minimum.at(width, span, np.maximum(rows[which, 1] - rows[which, 0], 1e-9))
     held = (spans.kind != SpanKind.POINT) & np.isfinite(width)
@@ -1282,15 +1282,9 @@ def node_holds(req: PlanRequest, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     for s_node, hold in ((s_a, hold_a), (s_b, hold_b)):
         lo = np.searchsorted(s_node, rows[:, 0], side="left")
         hi = np.searchsorted(s_node, rows[:, 1], side="right")
-        which, idx = _ranges(lo, np.maximum(hi - lo, 0))
+        which, idx = hold_ranges(lo, np.maximum(hi - lo, 0))
         np.minimum.at(hold, idx, rows[which, 2] ** 2)
     return hold_a, hold_b
-
-
-def _ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Range ``k`` is ``lo[k] .. lo[k] + count[k] - 1``: ``(which, index)`` over all of them, flattened."""
-    which = np.repeat(np.arange(lo.size), count)
-    return which, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
 
 
 def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: float) -> dict[str, np.ndarray]:
