@@ -9,7 +9,8 @@ axis unless ``--j-max 0``, at each of ``--rates``, as ``jaxcnc plan`` does (``pl
 written — ``tests/test_jerk.py`` checks such tables at every tick). Programs are names in ``../shared/peers/programs``
 or ``benchmarks/programs`` (``.ngc`` added), or paths; ``--head N`` plans each program's first N lines alone.
 Prints the planned time at each rate, their ratio (the last rate over the first) and the planning wall time.
-A program or machine file that is not there is an error (exit 2), never replaced by another.
+A program or machine file that is not there, or a program that cannot be planned, is a one-line error (exit 2),
+never replaced by another.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import time
 from pathlib import Path
 
 from jaxcnc.bench.common import run_header
+from jaxcnc.errors import JaxcncError
 from jaxcnc.gcode import load_gcode, parse_gcode
 from jaxcnc.machine import parse_machine
 from jaxcnc.planners import plan_job, program_start
@@ -71,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--j-max", type=float, default=1e6, help="mm/s³ on every axis; 0: none")
     parser.add_argument("--head", type=int, default=None, help="plan each program's first N lines alone")
     args = parser.parse_args(argv)
+    if args.head is not None and args.head < 1:
+        parser.error("--head takes a count of lines, 1 at least")
     try:
         paths = [find_program(p) for p in args.programs]
         texts = {(r, p): machine_text(r, args.j_max, p) for r in args.rates for p in args.planners}
@@ -83,7 +87,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  peers' machines, j_max {args.j_max:g} mm/s³{head}; planned s at {lo} / {hi} Hz, ratio, planning wall s")
     for path in paths:
         for planner in args.planners:
-            got = {r: plan_time(path, texts[(r, planner)], args.head, f"m{r}_{planner}") for r in args.rates}
+            try:
+                got = {r: plan_time(path, texts[(r, planner)], args.head, f"m{r}_{planner}") for r in args.rates}
+            except JaxcncError as exc:  # a program that cannot be planned, a planner that is not there: one line
+                print(f"tick_rates: {exc}", file=sys.stderr)
+                return 2
             (t_lo, w_lo), (t_hi, w_hi) = got[lo], got[hi]
             print(
                 f"  {path.stem:14s} {planner:10s} {t_lo:10.4f} / {t_hi:10.4f} s  ratio {t_hi / t_lo:.4f}"

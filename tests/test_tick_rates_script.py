@@ -24,6 +24,18 @@ def test_a_missing_program_is_an_error(capsys):
 
 
 @pytest.mark.skipif(not (PEERS / "machines").is_dir(), reason="../shared/peers absent")
+def test_a_program_that_cannot_be_planned_is_an_error(capsys):
+    """The first line of circle2000 alone has no motion, and ``no-such-planner`` is no planner: one line each, exit
+    2."""
+    script = _script()
+    assert script.main(["--programs", "circle2000", "--planners", "lookahead", "--head", "1"]) == 2
+    assert "no motion" in capsys.readouterr().err
+    assert script.main(["--programs", "circle2000", "--planners", "no-such-planner", "--j-max", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no-such-planner" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.skipif(not (PEERS / "machines").is_dir(), reason="../shared/peers absent")
 def test_it_prints_both_rates_and_their_ratio(capsys):
     """circle2000 with ``lookahead`` and no jerk limit (0.710 s at 1 kHz, 0.7094 s at 10 kHz when written)."""
     assert _script().main(["--programs", "circle2000", "--planners", "lookahead", "--j-max", "0"]) == 0
