@@ -55,6 +55,10 @@ def configure_jax(cache_dir: str | None = None) -> str | None:
         return None
     jax.config.update("jax_compilation_cache_dir", cache_dir)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
+    if all(os.environ.get(k, "1") != "0" for k in ("JAXCNC_EXPORT_CACHE", "JAXCNC_EXECUTABLE_CACHE")):
+        # the programs and their executables are stored in the cache directory (jaxcnc.jitcache) and loaded without
+        # JAX's cache, whose executables cannot be stored again (serialised anew, they lack their functions)
+        jax.config.update("jax_enable_compilation_cache", False)
     return cache_dir
 
 

@@ -38,6 +38,8 @@ import gc
 import hashlib
 import inspect
 import os
+import pickle
+import platform as platform_module
 import shutil
 import sys
 import tempfile
@@ -240,8 +242,9 @@ class _CachedJit:
             return self.jitted(*args, **kwargs)
 
     def _load_or_export(self, root: Path, key: tuple, static: dict, dynamic: list):
-        """The stored program's call for ``key``: read from ``root``, else traced, exported and written there;
-        ``None`` where ``jax.export`` cannot store it."""
+        """The stored program's call for ``key``: its executable for this host where one is stored (module
+        docstring), else the program read from ``root`` (or traced, exported and written there), compiled, and its
+        executable stored; ``None`` where ``jax.export`` cannot store it."""
         from jax import export
 
         platform = key[-1]
@@ -249,6 +252,13 @@ class _CachedJit:
         digest = hashlib.sha256(repr(made).encode()).hexdigest()
         folder = root / _source_fingerprint()
         path = folder / f"{self.fun.__module__}.{self.fun.__qualname__}-{digest[:32]}.exported"
+        binary = None
+        if executables_on():
+            host = hashlib.sha256(repr((digest, self.options, _host_key(platform))).encode()).hexdigest()
+            binary = path.with_name(f"{path.stem}-{host[:16]}.xla")
+            loaded = _load_executable(binary)
+            if loaded is not None:
+                return loaded
         exported = None
         try:
             exported = export.deserialize(bytearray(path.read_bytes()))
@@ -270,7 +280,8 @@ class _CachedJit:
                 exported = export.deserialize(bytearray(data))
             except Exception:  # not exportable (or the directory not writable): plain jax.jit
                 return None
-        return jax.jit(exported.call, compiler_options=self.options)
+        call = jax.jit(exported.call, compiler_options=self.options)
+        return call if binary is None else _compile_and_store(call, dynamic, folder, binary)
 
 
 def _static_key(value: Any) -> str | None:
@@ -389,10 +400,105 @@ def _const_bytes(const: Any) -> bytes:
     return repr(const).encode()
 
 
+def executables_on() -> bool:
+    """Whether compiled executables are stored and loaded beside the programs (``JAXCNC_EXECUTABLE_CACHE=0``: the
+    programs alone, compiled by each process, which the compile cache answers)."""
+    return os.environ.get("JAXCNC_EXECUTABLE_CACHE", "1") != "0" and hasattr(os, "getuid")
+
+
+@functools.cache
+def _host_key(platform: str) -> tuple:
+    """What an executable depends on beyond its program and JAX's versions: the device kind, and on a CPU the
+    processor (architecture, model, instruction-set flags) — XLA:CPU compiles for the features of the host, and
+    code made on one processor need not run on another sharing the cache directory."""
+    try:
+        kind = jax.devices(platform)[0].device_kind
+    except RuntimeError:
+        kind = platform
+    if platform != "cpu":
+        return (platform, kind)
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            info = f.read()
+    except OSError:
+        info = ""
+    first = info.split("\n\n", 1)[0]  # the first processor's lines (every core of a host is alike)
+    lines = tuple(ln for ln in first.splitlines() if ln.split(":", 1)[0].strip() in _CPU_KEYS)
+    return (platform, kind, platform_module.machine(), lines)
+
+
+#: The ``/proc/cpuinfo`` lines that name a processor and what code it runs.
+_CPU_KEYS = ("vendor_id", "cpu family", "model", "model name", "flags", "Features", "CPU implementer", "CPU part")
+
+
+def _private(path: Path) -> bool:
+    """Whether ``path`` and its folder belong to this user and no one else may write them: an executable is loaded
+    with ``pickle`` (how :mod:`jax.experimental.serialize_executable` stores one), which runs what the file says,
+    so only a file no other user could have written is read."""
+    uid = os.getuid()
+    for p in (path, path.parent):
+        st = p.stat()
+        if st.st_uid != uid or st.st_mode & 0o022:
+            return False
+    return True
+
+
+def _load_executable(path: Path):
+    """The executable stored at ``path`` (:func:`_compile_and_store`), loaded and ready to call; ``None`` where there
+    is none, it is not :func:`_private`, or it does not load (damaged, or from another jaxlib)."""
+    from jax.experimental import serialize_executable
+
+    try:
+        if not _private(path):
+            return None
+        payload, in_tree, out_tree = pickle.loads(path.read_bytes())
+        return serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+    except FileNotFoundError:
+        return None
+    except Exception:  # a damaged or foreign file: compiled again, and written over
+        return None
+
+
+def _compile_and_store(call: Callable, dynamic: list, folder: Path, path: Path):
+    """``call`` (a jitted program) compiled for ``dynamic`` (the compile cache answers where it can), its executable
+    written to ``path`` for later processes; the compiled executable, called as ``call`` is. Where it cannot be
+    compiled ahead or stored, ``call`` as it is (compiled on its first call, as before)."""
+    from jax.experimental import serialize_executable
+
+    _listen()
+    _HITS.n = 0
+    try:
+        compiled = call.lower(*dynamic).compile()
+    except Exception:
+        return call
+    if _HITS.n:  # loaded from JAX's compile cache: serialised again, such an executable lacks its functions
+        return compiled
+    try:
+        _write(folder, path, pickle.dumps(serialize_executable.serialize(compiled)))
+    except Exception:  # (a full disk, a read-only directory): this process runs it all the same
+        pass
+    return compiled
+
+
+#: JAX's persistent compile cache hits in this thread (:func:`_compile_and_store`'s guard).
+_HITS = threading.local()
+
+
+def _count_hit(event: str, **kwargs: Any) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _HITS.n = getattr(_HITS, "n", 0) + 1
+
+
+@functools.cache
+def _listen() -> None:
+    """Count JAX's compile-cache hits per thread from now on (its listeners are called in the compiling thread)."""
+    jax.monitoring.register_event_listener(_count_hit)
+
+
 def _write(folder: Path, path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically; the first write of a source version removes the oldest others."""
     fresh = not folder.exists()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)  # this user's alone (:func:`_private`), whatever the umask
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
     with os.fdopen(fd, "wb") as f:
         f.write(data)

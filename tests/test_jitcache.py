@@ -81,10 +81,13 @@ def test_a_changed_constant_makes_another_program(cache_dir, monkeypatch):
 
 
 def test_a_damaged_file_is_made_again(cache_dir):
+    """A damaged program, read where its executable is not there (the executable is read first, where it is)."""
     x = np.arange(3.0)
     _poly(x, {"a": 1.0}, power=2)
     (path,) = _stored(cache_dir)
     path.write_bytes(b"not a program")
+    for binary in (cache_dir / "exports").rglob("*.xla"):
+        binary.unlink()
     _poly.calls.clear()
     np.testing.assert_array_equal(np.asarray(_poly(x, {"a": 1.0}, power=2)["y"]), SCALE * x**2 + 1.0)
     assert path.read_bytes() != b"not a program"
@@ -143,6 +146,96 @@ def test_a_later_process_plans_from_the_stored_programs(tmp_path):
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-1] == runs[0][0]  # the same plan as jax.jit's, bit for bit
+
+
+_COUNTING_SCRIPT = textwrap.dedent(
+    """
+    import sys
+    import jax
+    compiles = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda event, duration, **kw: compiles.append(event) if event.endswith("backend_compile_duration") else None
+    )
+    from jaxcnc.jaxconfig import configure_jax
+    configure_jax(sys.argv[1])
+    if len(sys.argv) > 2:  # JAX's own compile cache on beside the stored executables
+        jax.config.update("jax_enable_compilation_cache", True)
+    from jaxcnc.bench.plan import bench_machine
+    from jaxcnc.bench.programs import cam_polyline
+    from jaxcnc.machine import parse_machine
+    from jaxcnc.planners import plan_job
+    job = plan_job(cam_polyline(300), parse_machine(bench_machine(0.01), "<bench>"))
+    import hashlib, numpy as np
+    h = hashlib.sha256()
+    for k in sorted(job.plan.columns):
+        h.update(np.ascontiguousarray(job.plan.column(k)).tobytes())
+    print(len(compiles), h.hexdigest())
+    """
+)
+
+
+def _counted_plan(cache: Path, env: dict, *extra: str) -> tuple[int, str]:
+    """:data:`_COUNTING_SCRIPT` in a fresh process: (XLA compiles, the plan's hash)."""
+    out = subprocess.run(
+        [sys.executable, "-c", _COUNTING_SCRIPT, str(cache), *extra], capture_output=True, text=True, env=env
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    n, digest = out.stdout.split()[-2:]
+    return int(n), digest
+
+
+def test_a_later_process_loads_the_stored_executables(tmp_path):
+    """The first process compiles and stores each program's executable beside it; a second one loads them and
+    compiles nothing of the planner's (the same plan, bit for bit, as without stored executables)."""
+    env = dict(os.environ, JAXCNC_EXPORT_CACHE="1")
+    cache = tmp_path / "cache"
+    first = _counted_plan(cache, env)
+    binaries = sorted(p.name for p in (cache / "exports").rglob("*.xla"))
+    assert first[0] > 5 and len(binaries) > 5
+    second = _counted_plan(cache, env)
+    assert second[1] == first[1]
+    assert second[0] <= 2  # (eager operations outside the stored programs: a scalar conversion or two)
+    assert sorted(p.name for p in (cache / "exports").rglob("*.xla")) == binaries
+    env["JAXCNC_EXECUTABLE_CACHE"] = "0"
+    plain = _counted_plan(tmp_path / "plain", env)
+    assert plain[1] == first[1] and not any((tmp_path / "plain").rglob("*.xla"))
+
+
+def test_executables_from_jaxs_compile_cache_are_not_stored(tmp_path):
+    """An executable JAX's compile cache handed back lacks its functions once serialised again (XLA:CPU: "Function
+    ... not found" when a later process runs it): such executables are run, never stored. Then a process that
+    compiles them itself stores them, and the next one runs them."""
+    env = dict(os.environ, JAXCNC_EXPORT_CACHE="1", JAXCNC_EXECUTABLE_CACHE="0")
+    cache = tmp_path / "cache"
+    reference = _counted_plan(cache, env, "jax-cache")  # fills JAX's cache (and stores the programs)
+    env["JAXCNC_EXECUTABLE_CACHE"] = "1"
+    from_jax = _counted_plan(cache, env, "jax-cache")  # JAX's cache answers every compile
+    assert from_jax[1] == reference[1]
+    assert not any(cache.rglob("*.xla"))
+    for _ in range(2):  # compiled here (JAX's cache off, as configure_jax leaves it), stored, then loaded
+        assert _counted_plan(cache, env)[1] == reference[1]
+    assert any(cache.rglob("*.xla"))
+
+
+def test_an_executable_others_may_write_or_a_damaged_one_is_not_loaded(cache_dir):
+    """Executables are read with pickle: one that another user could have written (group- or world-writable, or in
+    such a folder) is not loaded, nor is a damaged one; the program is compiled again, with the same results."""
+    x = np.linspace(0.0, 1.0, 10_000 + int.from_bytes(os.urandom(2), "little"))  # a shape JAX's cache cannot know
+    want = np.asarray(_poly.jitted(x, {"a": 3.0}, power=2)["y"])
+    np.testing.assert_array_equal(np.asarray(_poly(x, {"a": 3.0}, power=2)["y"]), want)
+    (binary,) = (cache_dir / "exports").rglob("*.xla")
+    assert jitcache._load_executable(binary) is not None
+    binary.chmod(0o666)
+    assert jitcache._load_executable(binary) is None
+    binary.chmod(0o600)
+    binary.parent.chmod(0o777)
+    assert jitcache._load_executable(binary) is None
+    binary.parent.chmod(0o700)
+    binary.write_bytes(b"not an executable")
+    assert jitcache._load_executable(binary) is None
+    _poly.calls.clear()
+    np.testing.assert_array_equal(np.asarray(_poly(x, {"a": 3.0}, power=2)["y"]), want)
+    assert jitcache._load_executable(binary) is not None  # compiled again and written over
 
 
 def test_the_command_line_writes_the_same_table_from_stored_programs(tmp_path):
