@@ -10,7 +10,9 @@ The persistent compile cache is the caller's choice: :func:`configure_jax` — c
 entry points (:mod:`jaxcnc.jobs`, ``jaxcnc`` commands, benchmarks), not by importing — points JAX at
 ``$JAXCNC_CACHE_DIR`` (default ``~/.cache/jaxcnc/jax``), so a command-line run after the first skips
 most of the JIT compile. ``JAXCNC_CACHE_DIR=""`` disables it; a cache directory the process already set
-is kept.
+is kept. The planners' programs and their executables are stored in the same directory by
+:mod:`jaxcnc.jitcache`, which loads them itself; JAX's own cache is then off (``JAXCNC_EXPORT_CACHE=0`` or
+``JAXCNC_EXECUTABLE_CACHE=0`` keep it on).
 
 Planning runs on the host CPU whatever the default backend (:func:`planning_scope`): its passes are
 sequential scans over the intervals, latency-bound, and a GPU pays a kernel launch and a host round trip

@@ -17,6 +17,17 @@ A stored program is used only where everything that made it is the same (the key
   and functions' code as they are in this process when the program is made: a constant or a function replaced
   at run time (a test's monkeypatch) makes other programs, never reads a stored one made without it.
 
+Beside each program its executable for this host (``.xla``: :mod:`jax.experimental.serialize_executable`, keyed
+also by the compiler options, the device kind and, on a CPU, the processor's model and instruction-set flags) is
+stored when the process compiles it, and a later process loads that instead of lowering the program and asking
+JAX's compile cache: a warm ``jaxcnc plan`` of a 1.5k-block CAM part loaded its 11 planning programs in 0.24 s
+against ~0.7 s through the compile cache (docs/planning.md, "Eighth pass"). The two do not mix: an executable that
+JAX's compile cache handed back lacks its functions when serialised again (XLA:CPU: "Function ... not found" in the
+process that runs it), so :func:`~jaxcnc.jaxconfig.configure_jax` turns JAX's cache off where executables are
+stored, and one it handed back all the same (its hits are counted per thread) is run but never stored. Executables
+are read with ``pickle``: only files and folders no other user may write. ``JAXCNC_EXECUTABLE_CACHE=0``: programs
+alone, compiled by every process (JAX's compile cache answers).
+
 Programs from other source versions are removed when a new version writes its first (the newest
 ``KEEP_VERSIONS`` kept). Set ``JAXCNC_EXPORT_CACHE=0`` to trace as ``jax.jit`` does. Anything ``jax.export``
 cannot store (or a damaged file) falls back to ``jax.jit``, with the same results.
@@ -398,6 +409,37 @@ def _const_bytes(const: Any) -> bytes:
     if isinstance(const, tuple):
         return b"(" + b",".join(_const_bytes(c) for c in const) + b")"
     return repr(const).encode()
+
+
+def remembered(name: str, probe: Callable[[], bool]) -> bool:
+    """``probe()``, a fact about this JAX and jaxlib (whether XLA knows an option, say), answered once per cache
+    directory: kept in a file named for it and the versions beside the stored programs, and asked of ``probe``
+    where there is no cache directory or no such file. One call at a time in a process (callers cache it)."""
+    root = export_dir()
+    if root is None:
+        return probe()
+    path = root / f"{name}-{'-'.join(map(str, _environment(_platform())))}.fact".replace(" ", "")
+
+    def read() -> bool | None:
+        try:
+            return {b"1": True, b"0": False}.get(path.read_bytes())
+        except OSError:
+            return None
+
+    with _LOCK:  # (two threads' first calls: one probe)
+        found = read()
+        if found is not None:
+            return found
+        found = probe()
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=root, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(b"1" if found else b"0")
+        os.replace(tmp, path)
+    except OSError:  # a read-only cache: asked again next time
+        pass
+    return found
 
 
 def executables_on() -> bool:

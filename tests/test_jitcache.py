@@ -359,3 +359,25 @@ def test_a_warm_up_runs_once_per_call_and_a_compile_ahead_every_time():
     assert again is not None and again.result().shape == (8,) and ran == [(7,), (8,)]
     assert float(jitcache.compile_ahead(fn, np.full(7, 2.0)).result()[0]) == 3.0  # seen: run here, result returned
     assert ran == [(7,), (8,), (7,)]
+
+
+def test_a_probed_fact_is_asked_once_per_cache_directory(cache_dir, monkeypatch):
+    """``remembered``: the probe runs where its answer is not stored yet (or the file holds something else) and
+    wherever there is no cache directory; otherwise the stored answer is read."""
+    asked = []
+
+    def probe() -> bool:
+        asked.append(1)
+        return True
+
+    assert jitcache.remembered("a-test-fact", probe) and len(asked) == 1
+    assert jitcache.remembered("a-test-fact", probe) and len(asked) == 1  # read back
+    (fact,) = (cache_dir / "exports").glob("a-test-fact-*.fact")
+    fact.write_bytes(b"garbage")
+    assert jitcache.remembered("a-test-fact", probe) and len(asked) == 2
+    assert fact.read_bytes() == b"1"
+    assert not jitcache.remembered("another-fact", lambda: False)
+    assert not jitcache.remembered("another-fact", probe)  # the stored False, not the probe's True
+    monkeypatch.setattr(jitcache, "DIRECTORY", None)
+    monkeypatch.setattr(jitcache, "export_dir", lambda: None)
+    assert jitcache.remembered("a-test-fact", probe) and len(asked) == 3

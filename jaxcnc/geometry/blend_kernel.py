@@ -23,7 +23,7 @@ import numpy as np
 
 import jaxcnc.jaxconfig  # noqa: F401  (float64)
 from jaxcnc.geometry import poly
-from jaxcnc.jitcache import cached_jit
+from jaxcnc.jitcache import cached_jit, remembered
 
 #: Points where a blend's parameter speed and maxima are checked (its check points).
 N_CHECK = 9
@@ -65,12 +65,18 @@ _NO_YNN = {"xla_cpu_experimental_ynn_fusion_type": ""}
 @cache
 def cpu_loop_options() -> dict[str, str]:
     """Compiler options that keep XLA:CPU's YNNPACK fusions out of small elementwise kernels (``{}`` where this
-    jaxlib does not know the option)."""
+    jaxlib does not know the option). Probed by a compile once per jaxlib and cache directory
+    (:func:`~jaxcnc.jitcache.remembered`): in a process that loads its executables, the probe's lowering and
+    compile were ~0.1 s of a warm 'jaxcnc plan'."""
+    return dict(_NO_YNN) if remembered("xla-cpu-ynn-fusion-option", _knows_no_ynn) else {}
+
+
+def _knows_no_ynn() -> bool:
     try:
         jax.jit(lambda x: x + 1.0, compiler_options=_NO_YNN).lower(1.0).compile()
     except jax.errors.JaxRuntimeError:
-        return {}
-    return dict(_NO_YNN)
+        return False
+    return True
 
 
 def blend_kernel(pts: jnp.ndarray, corner: jnp.ndarray) -> dict[str, jnp.ndarray]:
