@@ -11,8 +11,7 @@ entry points (:mod:`jaxcnc.jobs`, ``jaxcnc`` commands, benchmarks), not by impor
 ``$JAXCNC_CACHE_DIR`` (default ``~/.cache/jaxcnc/jax``), so a command-line run after the first skips
 most of the JIT compile. ``JAXCNC_CACHE_DIR=""`` disables it; a cache directory the process already set
 is kept. The planners' programs and their executables are stored in the same directory by
-:mod:`jaxcnc.jitcache`, which loads them itself; JAX's own cache is then off (``JAXCNC_EXPORT_CACHE=0`` or
-``JAXCNC_EXECUTABLE_CACHE=0`` keep it on).
+:mod:`jaxcnc.jitcache`, which loads them itself.
 
 Planning runs on the host CPU whatever the default backend (:func:`planning_scope`): its passes are
 sequential scans over the intervals, latency-bound, and a GPU pays a kernel launch and a host round trip
@@ -57,10 +56,6 @@ def configure_jax(cache_dir: str | None = None) -> str | None:
         return None
     jax.config.update("jax_compilation_cache_dir", cache_dir)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
-    if all(os.environ.get(k, "1") != "0" for k in ("JAXCNC_EXPORT_CACHE", "JAXCNC_EXECUTABLE_CACHE")):
-        # the programs and their executables are stored in the cache directory (jaxcnc.jitcache) and loaded without
-        # JAX's cache, whose executables cannot be stored again (serialised anew, they lack their functions)
-        jax.config.update("jax_enable_compilation_cache", False)
     return cache_dir
 
 

@@ -23,10 +23,11 @@ stored when the process compiles it, and a later process loads that instead of l
 JAX's compile cache: a warm ``jaxcnc plan`` of a 1.5k-block CAM part loaded its 11 planning programs in 0.24 s
 against ~0.7 s through the compile cache (docs/planning.md, "Eighth pass"). The two do not mix: an executable that
 JAX's compile cache handed back lacks its functions when serialised again (XLA:CPU: "Function ... not found" in the
-process that runs it), so :func:`~jaxcnc.jaxconfig.configure_jax` turns JAX's cache off where executables are
-stored, and one it handed back all the same (its hits are counted per thread) is run but never stored. Executables
-are read with ``pickle``: only files and folders no other user may write. ``JAXCNC_EXECUTABLE_CACHE=0``: programs
-alone, compiled by every process (JAX's compile cache answers).
+process that runs it). So a stored executable is compiled under a name of its own (the file's), which JAX's cache
+keys too — it never hands back one compiled for another version of the program — and one it handed back all the
+same (its hits are counted per thread) is run but never stored. Executables are read with ``pickle``: only files
+and folders no other user may write. ``JAXCNC_EXECUTABLE_CACHE=0``: programs alone, compiled by every process (JAX's
+compile cache answers).
 
 Programs from other source versions are removed when a new version writes its first (the newest
 ``KEEP_VERSIONS`` kept). Set ``JAXCNC_EXPORT_CACHE=0`` to trace as ``jax.jit`` does. Anything ``jax.export``
@@ -291,8 +292,12 @@ class _CachedJit:
                 exported = export.deserialize(bytearray(data))
             except Exception:  # not exportable (or the directory not writable): plain jax.jit
                 return None
-        call = jax.jit(exported.call, compiler_options=self.options)
-        return call if binary is None else _compile_and_store(call, dynamic, folder, binary)
+        if binary is None:
+            return jax.jit(exported.call, compiler_options=self.options)
+        # compiled under a name of its own (JAX's compile cache keys it by that name too: never an executable of
+        # another version of the program, nor one compiled where executables are not stored, comes back from it)
+        call = jax.jit(_named(exported.call, f"jaxcnc_{binary.stem[-16:]}"), compiler_options=self.options)
+        return _compile_and_store(call, dynamic, folder, binary)
 
 
 def _static_key(value: Any) -> str | None:
@@ -520,6 +525,16 @@ def _compile_and_store(call: Callable, dynamic: list, folder: Path, path: Path):
     except Exception:  # (a full disk, a read-only directory): this process runs it all the same
         pass
     return compiled
+
+
+def _named(fn: Callable, name: str) -> Callable:
+    """``fn`` under the name ``name`` (which names the program that ``jax.jit`` of it lowers)."""
+
+    def call(*args):
+        return fn(*args)
+
+    call.__name__ = call.__qualname__ = name
+    return call
 
 
 #: JAX's persistent compile cache hits in this thread (:func:`_compile_and_store`'s guard).

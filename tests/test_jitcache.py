@@ -158,8 +158,6 @@ _COUNTING_SCRIPT = textwrap.dedent(
     )
     from jaxcnc.jaxconfig import configure_jax
     configure_jax(sys.argv[1])
-    if len(sys.argv) > 2:  # JAX's own compile cache on beside the stored executables
-        jax.config.update("jax_enable_compilation_cache", True)
     from jaxcnc.bench.plan import bench_machine
     from jaxcnc.bench.programs import cam_polyline
     from jaxcnc.machine import parse_machine
@@ -174,11 +172,9 @@ _COUNTING_SCRIPT = textwrap.dedent(
 )
 
 
-def _counted_plan(cache: Path, env: dict, *extra: str) -> tuple[int, str]:
+def _counted_plan(cache: Path, env: dict) -> tuple[int, str]:
     """:data:`_COUNTING_SCRIPT` in a fresh process: (XLA compiles, the plan's hash)."""
-    out = subprocess.run(
-        [sys.executable, "-c", _COUNTING_SCRIPT, str(cache), *extra], capture_output=True, text=True, env=env
-    )
+    out = subprocess.run([sys.executable, "-c", _COUNTING_SCRIPT, str(cache)], capture_output=True, text=True, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
     n, digest = out.stdout.split()[-2:]
     return int(n), digest
@@ -202,19 +198,24 @@ def test_a_later_process_loads_the_stored_executables(tmp_path):
 
 
 def test_executables_from_jaxs_compile_cache_are_not_stored(tmp_path):
-    """An executable JAX's compile cache handed back lacks its functions once serialised again (XLA:CPU: "Function
-    ... not found" when a later process runs it): such executables are run, never stored. Then a process that
-    compiles them itself stores them, and the next one runs them."""
+    """An executable JAX's compile cache hands back lacks its functions once serialised again (XLA:CPU: "Function
+    ... not found" when a later process runs it). Programs compiled where executables are not stored do not come
+    back from JAX's cache under the stored executables' names (those are compiled afresh and stored), and one that
+    comes back all the same (its executable removed since) is run, never stored."""
     env = dict(os.environ, JAXCNC_EXPORT_CACHE="1", JAXCNC_EXECUTABLE_CACHE="0")
     cache = tmp_path / "cache"
-    reference = _counted_plan(cache, env, "jax-cache")  # fills JAX's cache (and stores the programs)
-    env["JAXCNC_EXECUTABLE_CACHE"] = "1"
-    from_jax = _counted_plan(cache, env, "jax-cache")  # JAX's cache answers every compile
-    assert from_jax[1] == reference[1]
+    reference = _counted_plan(cache, env)  # fills JAX's cache (and stores the programs alone)
     assert not any(cache.rglob("*.xla"))
-    for _ in range(2):  # compiled here (JAX's cache off, as configure_jax leaves it), stored, then loaded
+    env["JAXCNC_EXECUTABLE_CACHE"] = "1"
+    assert _counted_plan(cache, env)[1] == reference[1]  # compiled afresh under the executables' names
+    binaries = sorted(cache.rglob("*.xla"))
+    assert binaries
+    assert _counted_plan(cache, env)[1] == reference[1]  # loaded
+    for binary in binaries:
+        binary.unlink()
+    for _ in range(2):  # JAX's cache answers under the executables' names now: run, not stored
         assert _counted_plan(cache, env)[1] == reference[1]
-    assert any(cache.rglob("*.xla"))
+        assert not any(cache.rglob("*.xla"))
 
 
 def test_an_executable_others_may_write_or_a_damaged_one_is_not_loaded(cache_dir):
