@@ -500,16 +500,14 @@ def _load_executable(path: Path):
             return None
         payload, in_tree, out_tree = pickle.loads(path.read_bytes())
         return serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
-    except FileNotFoundError:
-        return None
-    except Exception:  # a damaged or foreign file: compiled again, and written over
+    except Exception:  # none yet, or a damaged or foreign file: compiled again, and written
         return None
 
 
 def _compile_and_store(call: Callable, dynamic: list, folder: Path, path: Path):
-    """``call`` (a jitted program) compiled for ``dynamic`` (the compile cache answers where it can), its executable
-    written to ``path`` for later processes; the compiled executable, called as ``call`` is. Where it cannot be
-    compiled ahead or stored, ``call`` as it is (compiled on its first call, as before)."""
+    """``call`` (a jitted program) compiled for ``dynamic``, its executable written to ``path`` for later processes
+    (unless JAX's compile cache answered the compile); the compiled executable, called as ``call`` is. Where it
+    cannot be compiled ahead, ``call`` as it is (compiled on its first call)."""
     from jax.experimental import serialize_executable
 
     _listen()
