@@ -180,42 +180,33 @@ def _counted_plan(cache: Path, env: dict) -> tuple[int, str]:
     return int(n), digest
 
 
-def test_a_later_process_loads_the_stored_executables(tmp_path):
-    """The first process compiles and stores each program's executable beside it; a second one loads them and
-    compiles nothing of the planner's (the same plan, bit for bit, as without stored executables)."""
-    env = dict(os.environ, JAXCNC_EXPORT_CACHE="1")
-    cache = tmp_path / "cache"
-    first = _counted_plan(cache, env)
-    binaries = sorted(p.name for p in (cache / "exports").rglob("*.xla"))
-    assert first[0] > 5 and len(binaries) > 5
-    second = _counted_plan(cache, env)
-    assert second[1] == first[1]
-    assert second[0] <= 2  # (eager operations outside the stored programs: a scalar conversion or two)
-    assert sorted(p.name for p in (cache / "exports").rglob("*.xla")) == binaries
-    env["JAXCNC_EXECUTABLE_CACHE"] = "0"
-    plain = _counted_plan(tmp_path / "plain", env)
-    assert plain[1] == first[1] and not any((tmp_path / "plain").rglob("*.xla"))
+def test_later_processes_load_the_stored_executables(tmp_path):
+    """Four processes plan one program with one cache directory, each the same plan bit for bit:
 
-
-def test_executables_from_jaxs_compile_cache_are_not_stored(tmp_path):
-    """An executable JAX's compile cache hands back lacks its functions once serialised again (XLA:CPU: "Function
-    ... not found" when a later process runs it). Programs compiled where executables are not stored do not come
-    back from JAX's cache under the stored executables' names (those are compiled afresh and stored), and one that
-    comes back all the same (its executable removed since) is run, never stored."""
+    1. executables off: JAX's compile cache is filled, the programs alone are stored;
+    2. executables on: compiled afresh under the executables' names (JAX's cache keys the name too, and an executable
+       it hands back lacks its functions once serialised again: XLA:CPU's "Function ... not found" in the process
+       that runs it) and stored;
+    3. loaded: none of the planner's programs is compiled;
+    4. the executables removed: JAX's cache answers under their names now, and such executables are run, never
+       stored.
+    """
     env = dict(os.environ, JAXCNC_EXPORT_CACHE="1", JAXCNC_EXECUTABLE_CACHE="0")
     cache = tmp_path / "cache"
-    reference = _counted_plan(cache, env)  # fills JAX's cache (and stores the programs alone)
+    reference = _counted_plan(cache, env)
     assert not any(cache.rglob("*.xla"))
     env["JAXCNC_EXECUTABLE_CACHE"] = "1"
-    assert _counted_plan(cache, env)[1] == reference[1]  # compiled afresh under the executables' names
+    stored = _counted_plan(cache, env)
     binaries = sorted(cache.rglob("*.xla"))
-    assert binaries
-    assert _counted_plan(cache, env)[1] == reference[1]  # loaded
+    assert stored[1] == reference[1] and stored[0] > 5 and len(binaries) > 5
+    loaded = _counted_plan(cache, env)
+    assert loaded[1] == reference[1]
+    assert loaded[0] <= 2  # (eager operations outside the stored programs: a scalar conversion or two)
+    assert sorted(cache.rglob("*.xla")) == binaries
     for binary in binaries:
         binary.unlink()
-    for _ in range(2):  # JAX's cache answers under the executables' names now: run, not stored
-        assert _counted_plan(cache, env)[1] == reference[1]
-        assert not any(cache.rglob("*.xla"))
+    assert _counted_plan(cache, env)[1] == reference[1]
+    assert not any(cache.rglob("*.xla"))
 
 
 def test_an_executable_others_may_write_or_a_damaged_one_is_not_loaded(cache_dir):
