@@ -52,6 +52,7 @@ import inspect
 import os
 import pickle
 import platform as platform_module
+import re
 import shutil
 import sys
 import tempfile
@@ -296,7 +297,8 @@ class _CachedJit:
             return jax.jit(exported.call, compiler_options=self.options)
         # compiled under a name of its own (JAX's compile cache keys it by that name too: never an executable of
         # another version of the program, nor one compiled where executables are not stored, comes back from it)
-        call = jax.jit(_named(exported.call, f"jaxcnc_{binary.stem[-16:]}"), compiler_options=self.options)
+        name = re.sub(r"\W", "_", f"jaxcnc_{self.fun.__qualname__}_{binary.stem[-16:]}")
+        call = jax.jit(_named(exported.call, name), compiler_options=self.options)
         return _compile_and_store(call, dynamic, folder, binary)
 
 
@@ -431,19 +433,19 @@ def remembered(name: str, probe: Callable[[], bool]) -> bool:
         except OSError:
             return None
 
-    with _LOCK:  # (two threads' first calls: one probe)
+    with _LOCK:  # (two threads' first calls: one probe, the other reads its answer)
         found = read()
         if found is not None:
             return found
         found = probe()
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=root, suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(b"1" if found else b"0")
-        os.replace(tmp, path)
-    except OSError:  # a read-only cache: asked again next time
-        pass
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=root, suffix=".tmp")
+            with os.fdopen(fd, "wb") as f:
+                f.write(b"1" if found else b"0")
+            os.replace(tmp, path)
+        except OSError:  # a read-only cache: asked again next time
+            pass
     return found
 
 
