@@ -439,11 +439,7 @@ def remembered(name: str, probe: Callable[[], bool]) -> bool:
             return found
         found = probe()
         try:
-            root.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=root, suffix=".tmp")
-            with os.fdopen(fd, "wb") as f:
-                f.write(b"1" if found else b"0")
-            os.replace(tmp, path)
+            _write_atomic(root, path, b"1" if found else b"0")
         except OSError:  # a read-only cache: asked again next time
             pass
     return found
@@ -555,15 +551,20 @@ def _listen() -> None:
 def _write(folder: Path, path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically; the first write of a source version removes the oldest others."""
     fresh = not folder.exists()
+    _write_atomic(folder, path, data)
+    if fresh:
+        others = sorted((p for p in folder.parent.iterdir() if p.is_dir() and p != folder), key=_mtime, reverse=True)
+        for old in others[KEEP_VERSIONS - 1 :]:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def _write_atomic(folder: Path, path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` in ``folder`` (made where missing) through a temporary file and a rename."""
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)  # this user's alone (:func:`_private`), whatever the umask
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
     with os.fdopen(fd, "wb") as f:
         f.write(data)
     os.replace(tmp, path)
-    if fresh:
-        others = sorted((p for p in folder.parent.iterdir() if p.is_dir() and p != folder), key=_mtime, reverse=True)
-        for old in others[KEEP_VERSIONS - 1 :]:
-            shutil.rmtree(old, ignore_errors=True)
 
 
 def _mtime(path: Path) -> float:
