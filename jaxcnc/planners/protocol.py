@@ -89,11 +89,39 @@ def step_rate_hz(request: PlanRequest) -> float:
 POSITION_ULPS = 8
 
 
-def hold_ranges(lo: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Range ``k`` is ``lo[k] .. lo[k] + count[k] - 1`` (the spans or nodes a row of ``hold_caps`` reaches):
-    ``(which, index)`` over all of them, flattened."""
-    which = np.repeat(np.arange(lo.size), count)
-    return which, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + lo[which]
+def range_min(size: int, lo: np.ndarray, count: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """``(size,)``: at each index the least ``value[k]`` of the ranges ``lo[k] .. lo[k] + count[k] - 1`` that reach
+    it (``inf`` where none does; ranges of no length reach nothing) — the spans or nodes the rows of ``hold_caps``
+    reach, each capped by the lowest of them.
+
+    Without listing every (range, index) pair, whose number grows with how much the ranges overlap (the S-curve
+    stage's holds accumulate round after round: 7.4 M pairs for 284k holds on laser_parts_a's grid). A range of
+    ``c`` indices is the union of two blocks of ``2^⌊log2 c⌋`` (they overlap, which a minimum does not mind): each
+    block's value goes to the table of its size (``np.minimum.at``, two entries per range), and each table, from
+    the largest blocks down, passes its values on to the two halves of each block in the table below — the same
+    minima as over the pairs, exactly (a minimum is the same in any order; only which of a tied ``0.0`` and ``-0.0``
+    is kept may differ, and caps are never negative), in ``O(size · log2(longest range))``.
+    """
+    out = np.full(size, np.inf)
+    keep = count > 0
+    if not keep.any():
+        return out
+    lo, count, value = lo[keep], count[keep], np.asarray(value, dtype=np.float64)[keep]
+    level = np.frexp(count.astype(np.float64))[1] - 1  # ⌊log2 c⌋, exact for integers
+    table = None  # blocks of 2^k indices from k = top down; entry i covers i .. i + 2^k - 1
+    for k in range(int(level.max()), -1, -1):
+        below = out if k == 0 else np.full(size - (1 << k) + 1, np.inf)
+        if table is not None:  # the blocks of 2^(k+1): each is its two halves
+            half = 1 << k
+            n = table.size
+            np.minimum(below[:n], table, out=below[:n])
+            np.minimum(below[half : half + n], table, out=below[half : half + n])
+        sel = level == k
+        if sel.any():
+            np.minimum.at(below, lo[sel], value[sel])
+            np.minimum.at(below, lo[sel] + count[sel] - (1 << k), value[sel])
+        table = below
+    return out
 
 
 def with_margin(limit):

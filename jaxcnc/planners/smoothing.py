@@ -32,7 +32,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, reduce
 
 import jax
 import jax.numpy as jnp
@@ -51,9 +51,9 @@ from jaxcnc.planners.protocol import (
     Planner,
     PlanRequest,
     TimeLaw,
-    hold_ranges,
     jerk_substeps,
     machine_limits,
+    range_min,
     with_margin,
 )
 from jaxcnc.planners.timelaw import PLAN_COLUMNS, PLAN_KEYS, Plan, segment_of_tick
@@ -364,17 +364,41 @@ def span_peaks(
         x = np.concatenate([tail, p] + ([np.repeat(p[-1:], 3, axis=0)] if last_chunk else []))
         at = np.concatenate([span, np.repeat(span[-1:], 3)]) if last_chunk else span
         s = np.concatenate([s, np.repeat(s[-1:], 3)]) if last_chunk else s
-        v = np.linalg.norm(np.diff(x, axis=0)[-at.shape[0] :], axis=1) * f
-        np.maximum.at(speed, at, v)
+        runs = _runs(at)
+        diff = np.diff(x, axis=0)
+        v = np.linalg.norm(diff[-at.shape[0] :], axis=1) * f
+        _max_into(speed, at, v, runs)
         for k in range(3):
-            d = np.abs(np.diff(x, k + 1, axis=0))[-at.shape[0] :] * f ** (k + 1)  # rows ending in this chunk
-            ratio = np.max(d * inv[k], axis=1)
-            np.maximum.at(worst[k // 2], at, ratio)
+            if k:
+                diff = np.diff(diff, axis=0)  # (np.diff of order k + 1: the same differences, bit for bit)
+            d = np.abs(diff)[-at.shape[0] :] * f ** (k + 1)  # rows ending in this chunk
+            # the worst axis: an elementwise maximum over the columns (a reduction along a row of 3 is ~10x slower)
+            ratio = reduce(np.maximum, (d[:, i] * inv[k][i] for i in range(d.shape[1])))
+            _max_into(worst[k // 2], at, ratio, runs)
             if k == 2:
                 hit = (ratio > 0) & (ratio >= worst[1][at])
                 where[0][at[hit]], where[1][at[hit]] = s[hit], v[hit]
         tail = x[-3:]
     return worst, speed, where
+
+
+def _runs(at: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where the runs of equal entries of ``at`` ``(q,)`` start and their values, if ``at`` is sorted (the spans of
+    ticks in time order), else ``None``."""
+    if at.size == 0 or np.any(at[1:] < at[:-1]):
+        return None
+    starts = np.flatnonzero(np.concatenate([[True], at[1:] != at[:-1]]))
+    return starts, at[starts]
+
+
+def _max_into(target: np.ndarray, at: np.ndarray, value: np.ndarray, runs) -> None:
+    """``np.maximum.at(target, at, value)``, one maximum per run where ``runs`` (:func:`_runs`) says ``at`` is
+    sorted (a reduction over each run, ~10x faster than the unbuffered ``at``; the same maxima, exactly)."""
+    if runs is None:
+        np.maximum.at(target, at, value)
+        return
+    starts, keys = runs
+    target[keys] = np.maximum(target[keys], np.maximum.reduceat(value, starts))
 
 
 def passed_speed(speed: np.ndarray) -> np.ndarray:
@@ -654,10 +678,7 @@ def held_feed(spans: Spans, span_s0: np.ndarray, feed: np.ndarray, holds: np.nda
     s1 = span_s0 + spans.length
     first = np.searchsorted(s1, rows[:, 0], side="right")  # the first span ending past s_lo
     count = np.maximum(np.searchsorted(span_s0, rows[:, 1], side="left") - first, 0)  # ... to the last before s_hi
-    which, span = hold_ranges(first, count)
-    cap = np.full(feed.size, np.inf)
-    np.minimum.at(cap, span, rows[which, 2])
-    return np.minimum(feed, cap)
+    return np.minimum(feed, range_min(feed.size, first, count, rows[:, 2]))
 
 
 def _jerk_search(request: PlanRequest, planner: Planner, iterations: int, by_span: bool) -> tuple[SmoothPlan, bool]:

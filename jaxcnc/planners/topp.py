@@ -65,7 +65,7 @@ from jaxcnc.planners.phaseplane import (
     static_cap,
     window_pieces,
 )
-from jaxcnc.planners.protocol import Planner, PlanRequest, hold_ranges, jerk_limits, step_rate_hz
+from jaxcnc.planners.protocol import Planner, PlanRequest, jerk_limits, range_min, step_rate_hz
 from jaxcnc.planners.registry import register_planner
 from jaxcnc.planners.timelaw import (
     RAMP_COLUMNS,
@@ -1262,9 +1262,7 @@ def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
     rows = np.asarray(req.hold_caps, dtype=np.float64)
     first = np.clip(np.searchsorted(span_s0, rows[:, 0], side="right") - 1, 0, len(spans) - 1)
     last = np.clip(np.searchsorted(span_s0, rows[:, 1], side="right") - 1, 0, len(spans) - 1)
-    which, span = hold_ranges(first, last - first + 1)
-    width = np.full(len(spans), np.inf)
-    np.minimum.at(width, span, np.maximum(rows[which, 1] - rows[which, 0], 1e-9))
+    width = range_min(len(spans), first, last - first + 1, np.maximum(rows[:, 1] - rows[:, 0], 1e-9))
     held = (spans.kind != SpanKind.POINT) & np.isfinite(width)
     cuts = np.ceil(spans.length / (0.5 * np.where(held, width, 1.0))).astype(np.int64)
     return np.where(held, np.maximum(counts, np.minimum(cuts, MAX_HOLD_CUTS)), counts)
@@ -1273,18 +1271,18 @@ def hold_counts(req: PlanRequest, counts: np.ndarray) -> np.ndarray:
 def node_holds(req: PlanRequest, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """``(m,)`` caps on ``x = v²`` at each interval's start and end node from ``req.hold_caps``."""
     m = len(grid)
-    hold_a, hold_b = np.full(m, np.inf), np.full(m, np.inf)
     if req.hold_caps is None or len(req.hold_caps) == 0:
-        return hold_a, hold_b
+        return np.full(m, np.inf), np.full(m, np.inf)
     s_a = req.spans.s0[grid.span] + grid.s_start  # nodes in path order: sorted
     s_b = s_a + grid.delta
     rows = np.asarray(req.hold_caps, dtype=np.float64)
-    for s_node, hold in ((s_a, hold_a), (s_b, hold_b)):
+    x_cap = rows[:, 2] ** 2
+
+    def caps(s_node: np.ndarray) -> np.ndarray:
         lo = np.searchsorted(s_node, rows[:, 0], side="left")
-        hi = np.searchsorted(s_node, rows[:, 1], side="right")
-        which, idx = hold_ranges(lo, np.maximum(hi - lo, 0))
-        np.minimum.at(hold, idx, rows[which, 2] ** 2)
-    return hold_a, hold_b
+        return range_min(m, lo, np.searchsorted(s_node, rows[:, 1], side="right") - lo, x_cap)
+
+    return caps(s_a), caps(s_b)
 
 
 def _solve_grid(req: PlanRequest, facts: _ProgramFacts, grid: Grid, x_start: float) -> dict[str, np.ndarray]:
