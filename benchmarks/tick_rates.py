@@ -8,7 +8,9 @@ Plans each program with each planner on the peers' matched machines (``../shared
 axis unless ``--j-max 0``, at each of ``--rates``, as ``jaxcnc plan`` does (``plan_job``; the tables are not
 written — ``tests/test_jerk.py`` checks such tables at every tick). Programs are names in ``../shared/peers/programs``
 or ``benchmarks/programs`` (``.ngc`` added), or paths; ``--head N`` plans each program's first N lines alone.
-Prints the planned time at each rate, their ratio (the last rate over the first) and the planning wall time.
+Prints the planned time at each rate, their ratio (the last rate over the first) and the planning wall time of the
+first plan (JIT compile included where the compile cache is cold); with ``--repeats N`` also the wall time (min/median)
+and the CPU time (min) of N more plans in the same process, the steady state.
 A program or machine file that is not there, or a program that cannot be planned, is a one-line error (exit 2),
 never replaced by another.
 """
@@ -21,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from jaxcnc.bench.common import run_header
+from jaxcnc.bench.common import Stat, measure, run_header
 from jaxcnc.errors import JaxcncError
 from jaxcnc.gcode import load_gcode, parse_gcode
 from jaxcnc.machine import parse_machine
@@ -51,8 +53,9 @@ def machine_text(rate: int, j_max: float, planner: str) -> str:
     return re.sub(r"(?m)^\[machine\]$", f'[machine]\nplanner = "{planner}"', text)
 
 
-def plan_time(path: Path, text: str, head: int | None, name: str) -> tuple[float, float]:
-    """Planned time (s) and planning wall time (s) of the program at ``path`` on the machine ``text``."""
+def plan_time(path: Path, text: str, head: int | None, name: str, repeats: int = 0) -> tuple[float, float, Stat | None]:
+    """Planned time (s) and planning wall time (s) of the program at ``path`` on the machine ``text``, and with
+    ``repeats`` the wall and CPU time of that many more plans of it in this process (compiled: the steady state)."""
     machine = parse_machine(text, name)
     start = program_start(machine)
     if head is None:
@@ -62,7 +65,9 @@ def plan_time(path: Path, text: str, head: int | None, name: str) -> tuple[float
         program = parse_gcode("\n".join(lines) + "\nM2\n", path.name, start=start, home=start)
     t0 = time.perf_counter()
     job = plan_job(program, machine)
-    return job.plan.total_time_s, time.perf_counter() - t0
+    first = time.perf_counter() - t0
+    steady = measure(lambda: plan_job(program, machine), repeats) if repeats else None
+    return job.plan.total_time_s, first, steady
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,6 +77,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rates", nargs=2, type=int, default=[1000, 10000])
     parser.add_argument("--j-max", type=float, default=1e6, help="mm/s³ on every axis; 0: none")
     parser.add_argument("--head", type=int, default=None, help="plan each program's first N lines alone")
+    parser.add_argument(
+        "--repeats", type=int, default=0, help="plan each so many times more: steady wall min/median and CPU (s)"
+    )
     args = parser.parse_args(argv)
     if args.head is not None and args.head < 1:
         parser.error("--head takes a count of lines, 1 at least")
@@ -88,14 +96,23 @@ def main(argv: list[str] | None = None) -> int:
     for path in paths:
         for planner in args.planners:
             try:
-                got = {r: plan_time(path, texts[(r, planner)], args.head, f"m{r}_{planner}") for r in args.rates}
+                got = {
+                    r: plan_time(path, texts[(r, planner)], args.head, f"m{r}_{planner}", args.repeats)
+                    for r in args.rates
+                }
             except JaxcncError as exc:  # a program that cannot be planned, a planner that is not there: one line
                 print(f"tick_rates: {exc}", file=sys.stderr)
                 return 2
-            (t_lo, w_lo), (t_hi, w_hi) = got[lo], got[hi]
+            (t_lo, w_lo, s_lo), (t_hi, w_hi, s_hi) = got[lo], got[hi]
+            steady = (
+                f"; then {s_lo.wall_min:.2f}/{s_lo.wall_median:.2f} / {s_hi.wall_min:.2f}/{s_hi.wall_median:.2f} s"
+                f" (CPU {s_lo.cpu_min:.2f} / {s_hi.cpu_min:.2f} s)"
+                if s_lo is not None
+                else ""
+            )
             print(
                 f"  {path.stem:14s} {planner:10s} {t_lo:10.4f} / {t_hi:10.4f} s  ratio {t_hi / t_lo:.4f}"
-                f"  planned in {w_lo:6.1f} / {w_hi:6.1f} s",
+                f"  planned in {w_lo:6.1f} / {w_hi:6.1f} s{steady}",
                 flush=True,
             )
     return 0

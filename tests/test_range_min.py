@@ -1,5 +1,5 @@
 """``protocol.range_min`` (the caps the holds put on spans and nodes) against the minimum over every (range, index)
-pair, and ``smoothing``'s per-span maxima over sorted runs against ``np.maximum.at``."""
+pair, and the S-curve stage's measurement helpers (per-span maxima over sorted runs, row norms) against NumPy's own."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxcnc.planners.protocol import range_min
-from jaxcnc.planners.smoothing import _max_into, _runs
+from jaxcnc.planners.smoothing import _max_into, _row_norms, _runs
 
 
 def pairs_min(size: int, lo: np.ndarray, count: np.ndarray, value: np.ndarray) -> np.ndarray:
@@ -71,3 +71,12 @@ def test_the_maxima_over_runs_are_those_of_maximum_at(keys, values, ordered):
         np.maximum.at(want, at, value)
         _max_into(got, at, value, runs)
     assert np.array_equal(got, want, equal_nan=True)
+
+
+def test_row_norms_are_those_of_numpy():
+    rng = np.random.default_rng(3)
+    d = rng.standard_normal((20_000, 3)) * rng.choice([1e-9, 1e-3, 1.0, 1e4], (20_000, 3))
+    want = np.linalg.norm(d, axis=1)
+    # the same sum order as NumPy 2.4's (bit for bit there); within an ulp under any order of the three terms
+    assert np.allclose(_row_norms(d), want, rtol=4e-16, atol=0)
+    assert np.array_equal(_row_norms(d[:0]), want[:0])

@@ -366,12 +366,12 @@ def span_peaks(
         s = np.concatenate([s, np.repeat(s[-1:], 3)]) if last_chunk else s
         runs = _runs(at)
         diff = np.diff(x, axis=0)
-        v = np.linalg.norm(diff[-at.shape[0] :], axis=1) * f
+        v = _row_norms(diff[-at.shape[0] :]) * f
         _max_into(speed, at, v, runs)
         for k in range(3):
             if k:
                 diff = np.diff(diff, axis=0)  # (np.diff of order k + 1: the same differences, bit for bit)
-            d = np.abs(diff)[-at.shape[0] :] * f ** (k + 1)  # rows ending in this chunk
+            d = np.abs(diff[-at.shape[0] :]) * f ** (k + 1)  # rows ending in this chunk
             # the worst axis: an elementwise maximum over the columns (a reduction along a row of 3 is ~10x slower)
             ratio = reduce(np.maximum, (d[:, i] * inv[k][i] for i in range(d.shape[1])))
             _max_into(worst[k // 2], at, ratio, runs)
@@ -380,6 +380,12 @@ def span_peaks(
                 where[0][at[hit]], where[1][at[hit]] = s[hit], v[hit]
         tail = x[-3:]
     return worst, speed, where
+
+
+def _row_norms(d: np.ndarray) -> np.ndarray:
+    """``(q,)`` Euclidean norms of the rows of ``d`` ``(q, axes)``, summed column by column: ``np.linalg.norm(d,
+    axis=1)``'s ``sqrt((d0² + d1²) + d2²)`` (the same bits with NumPy 2.4), ~3x faster than its reduction along rows."""
+    return np.sqrt(reduce(np.add, (d[:, i] * d[:, i] for i in range(d.shape[1]))))
 
 
 def _runs(at: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
