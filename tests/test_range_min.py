@@ -1,5 +1,6 @@
 """``protocol.range_min`` (the caps the holds put on spans and nodes) against the minimum over every (range, index)
-pair, and the S-curve stage's measurement helpers (per-span maxima over sorted runs, row norms) against NumPy's own."""
+pair, and the S-curve stage's measurement helpers (per-span maxima over sorted runs, ``spans.row_norm``) against
+NumPy's own."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from jaxcnc.geometry.spans import row_norm
 from jaxcnc.planners.protocol import range_min
-from jaxcnc.planners.smoothing import _max_into, _row_norms, _runs
+from jaxcnc.planners.smoothing import _max_into, _runs
 
 
 def pairs_min(size: int, lo: np.ndarray, count: np.ndarray, value: np.ndarray) -> np.ndarray:
@@ -73,10 +75,10 @@ def test_the_maxima_over_runs_are_those_of_maximum_at(keys, values, ordered):
     assert np.array_equal(got, want, equal_nan=True)
 
 
-def test_row_norms_are_those_of_numpy():
+def test_the_measured_speeds_row_norms_are_those_of_numpy():
     rng = np.random.default_rng(3)
     d = rng.standard_normal((20_000, 3)) * rng.choice([1e-9, 1e-3, 1.0, 1e4], (20_000, 3))
     want = np.linalg.norm(d, axis=1)
     # the same sum order as NumPy 2.4's (bit for bit there); within an ulp under any order of the three terms
-    assert np.allclose(_row_norms(d), want, rtol=4e-16, atol=0)
-    assert np.array_equal(_row_norms(d[:0]), want[:0])
+    assert np.allclose(row_norm(d), want, rtol=4e-16, atol=0)
+    assert np.array_equal(row_norm(d[:0]), want[:0])

@@ -43,7 +43,7 @@ from jaxcnc.buckets import bucket_size
 from jaxcnc.errors import PlanningError
 from jaxcnc.geometry.evaluate import evaluate_path, span_arrays
 from jaxcnc.geometry.kinds import SpanKind
-from jaxcnc.geometry.spans import Spans, pad_spans
+from jaxcnc.geometry.spans import Spans, pad_spans, row_norm
 from jaxcnc.jitcache import cached_jit
 from jaxcnc.planners.motion import trapezoid_integral
 from jaxcnc.planners.protocol import (
@@ -366,7 +366,7 @@ def span_peaks(
         s = np.concatenate([s, np.repeat(s[-1:], 3)]) if last_chunk else s
         runs = _runs(at)
         diff = np.diff(x, axis=0)
-        v = _row_norms(diff[-at.shape[0] :]) * f
+        v = row_norm(diff[-at.shape[0] :]) * f  # (np.linalg.norm's sum, column by column: ~3x faster)
         _max_into(speed, at, v, runs)
         for k in range(3):
             if k:
@@ -380,12 +380,6 @@ def span_peaks(
                 where[0][at[hit]], where[1][at[hit]] = s[hit], v[hit]
         tail = x[-3:]
     return worst, speed, where
-
-
-def _row_norms(d: np.ndarray) -> np.ndarray:
-    """``(q,)`` Euclidean norms of the rows of ``d`` ``(q, axes)``, summed column by column: ``np.linalg.norm(d,
-    axis=1)``'s ``sqrt((d0² + d1²) + d2²)`` (the same bits with NumPy 2.4), ~3x faster than its reduction along rows."""
-    return np.sqrt(reduce(np.add, (d[:, i] * d[:, i] for i in range(d.shape[1]))))
 
 
 def _runs(at: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
