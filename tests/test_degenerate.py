@@ -104,6 +104,31 @@ def test_a_tiny_curve_between_rests_takes_the_time_its_acceleration_needs(tmp_pa
     assert length > 0 and job.plan.duration_s[on].sum() >= 2.0 * np.sqrt(length / a_bound)
 
 
+#: Arcs whose end lies at the start's angle but not on the start (a red-team pass on 2026-12-08: 1 nm off it, as
+#: G91 round-off leaves it): the sweep came out 0, the helix rise 0/0, and planning died in a traceback
+#: (``np.repeat``: negative counts). They are whole turns, in the spans and in the check's geometry alike.
+ARCS_AT_THEIR_START_ANGLE = {
+    "G2, end 1 nm inside": ("G1 X0 Y0 F600\nG2 X0.000000001 Y0 I5 J0\nG1 X1\n", 5.0),
+    "G3, end 1 nm outside": ("G1 X0 Y0 F600\nG3 X-0.000000001 Y0 I5 J0\nG1 X1\n", 5.0),
+    "G18": ("G18\nG1 X0 Z0 F600\nG2 X0.000000001 Z0 I5 K0\nG1 X1\n", 5.0),
+}
+
+
+@pytest.mark.parametrize("corner_tol", [0.0, 0.01])
+@pytest.mark.parametrize("name", ARCS_AT_THEIR_START_ANGLE)
+def test_an_arc_ending_at_its_start_angle_is_a_whole_turn(tmp_path, name, corner_tol):
+    from tests.helpers import table_of
+
+    text, radius = ARCS_AT_THEIR_START_ANGLE[name]
+    m = parse_machine(machine_text(tick_hz=1000).replace("corner_tol_mm = 0.0", f"corner_tol_mm = {corner_tol}"), "m")
+    job, _, meas = table_of(text, m, tmp_path)
+    assert meas.ok, meas.violations[:3]
+    arc = np.flatnonzero(job.program.kind == Kind.ARC)[0]
+    on = job.spans.block == arc
+    # the whole circle, less what blends at its ends take (at most a few tolerances' worth)
+    assert abs(float(job.spans.length[on].sum()) - 2 * np.pi * radius) <= 1e-9 + 40 * corner_tol
+
+
 def test_gcode_arc_turns_are_bounded():
     with pytest.raises(SourceError, match="turns"):
         parse_gcode("G2 X0 Y0 I1 F100 P1000000000\n", "t.ngc")

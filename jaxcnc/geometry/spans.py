@@ -248,8 +248,8 @@ def _unpermute(a: np.ndarray, perm: np.ndarray) -> np.ndarray:
 def arc_fields(p: Program, rows: np.ndarray) -> tuple[dict[str, np.ndarray], ArcTable]:
     """Arc and helix rows → span fields and their :class:`ArcTable` rows (in plane coordinates, then back).
 
-    The sweep is in ``(0, 2π]`` in the row's direction; an end equal to the start (in the plane) is a
-    full circle; motion along the plane's normal makes a helix.
+    The sweep is in ``(0, 2π]`` in the row's direction; an end equal to the start (in the plane), or at the
+    start's angle, is a full circle; motion along the plane's normal makes a helix.
     """
     perm = _PLANE_AXES[p.plane[rows]]
     s, e, c = (np.take_along_axis(a[rows], perm, axis=1) for a in (p.start, p.end, p.center))
@@ -258,7 +258,8 @@ def arc_fields(p: Program, rows: np.ndarray) -> tuple[dict[str, np.ndarray], Arc
     th_s = np.arctan2(*(s - c)[:, 1::-1].T)
     th_e = np.arctan2(*(e - c)[:, 1::-1].T)
     sweep = np.mod(turn * (th_e - th_s), 2 * np.pi)  # in [0, 2π)
-    sweep = np.where(np.hypot(*(e - s)[:, :2].T) < MIN_LENGTH_MM, 2 * np.pi, sweep)
+    # an end at the start, or at the start's angle (off it along the radius, as G91 round-off leaves it): a whole turn
+    sweep = np.where((np.hypot(*(e - s)[:, :2].T) < MIN_LENGTH_MM) | (sweep == 0), 2 * np.pi, sweep)
     rise = (e[:, 2] - s[:, 2]) / sweep
     zero, one = np.zeros_like(r), np.ones_like(r)
     e1 = np.stack([np.cos(th_s), np.sin(th_s), zero], axis=1)

@@ -170,8 +170,10 @@ def make_arcs(start: np.ndarray, end: np.ndarray, center: np.ndarray, turn: np.n
     c = np.take_along_axis(center, perm, axis=1)
     phi0 = np.arctan2(s[:, 1] - c[:, 1], s[:, 0] - c[:, 0])
     phi1 = np.arctan2(e[:, 1] - c[:, 1], e[:, 0] - c[:, 0])
-    full = np.hypot(e[:, 0] - s[:, 0], e[:, 1] - s[:, 1]) < FULL_CIRCLE_MM
-    sweep = np.where(full, _TWO_PI, np.mod(turn * (phi1 - phi0), _TWO_PI)) * turn
+    part = np.mod(turn * (phi1 - phi0), _TWO_PI)
+    # an end at the start, or at the start's angle (off it along the radius): a whole turn
+    full = (np.hypot(e[:, 0] - s[:, 0], e[:, 1] - s[:, 1]) < FULL_CIRCLE_MM) | (part == 0)
+    sweep = np.where(full, _TWO_PI, part) * turn
     return Arcs(
         perm=perm,
         cu=c[:, 0],
