@@ -28,6 +28,9 @@ PROGRAM_AXES = ("x", "y", "z")
 MIN_FEED_MM_S = 1e-6
 #: An arc's radius below this (mm) is no arc: its centre is its start point.
 MIN_ARC_RADIUS_MM = 1e-9
+#: A line shorter than this (mm) moves nothing: it makes no span, and the check treats it as a row that stands (as
+#: G91 round-off leaves one: 0.1 + 0.1 + 0.1 then G90 X0.3 is a move of 5.5e-17 mm, backwards).
+MIN_MOVE_MM = 1e-9
 #: The arc planes and their (first, second) axes (G17 XY, G18 ZX, G19 YZ).
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 

@@ -237,7 +237,7 @@ def _row_programs(draw):
             x, y, z = (round(draw(st.floats(-50, 50)), 3) for _ in range(3))
             lines.append(f"G1 X{x} Y{y} Z{z}")
         elif what == "still":
-            lines.append(f"G1 X{x} Y{y}")
+            lines.append(f"G1 X{x:.6f} Y{y:.6f}")
         elif what == "arc":
             i, j = (round(draw(st.floats(-5, 5)), 3) for _ in range(2))
             r = float(np.hypot(i, j))
@@ -248,7 +248,8 @@ def _row_programs(draw):
             x, y = round(cx + r * np.cos(a), 6), round(cy + r * np.sin(a), 6)
             dz = round(draw(st.sampled_from([0.0, 0.5])), 3)
             z = round(z + dz, 3)
-            lines.append(f"G{draw(st.sampled_from([2, 3]))} X{x} Y{y} Z{z} I{i} J{j}")
+            # (fixed point: str() writes 3.1e-05, which G-code reads as X3.1 and a word E-05)
+            lines.append(f"G{draw(st.sampled_from([2, 3]))} X{x:.6f} Y{y:.6f} Z{z} I{i} J{j}")
         elif what == "dwell":
             lines.append("G4 P0.1")
         else:

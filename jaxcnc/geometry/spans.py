@@ -27,14 +27,14 @@ import numpy as np
 
 from jaxcnc.geometry.bezier import elevate, homogeneous_power, nurbs_to_bezier
 from jaxcnc.geometry.kinds import CURVED_KINDS, POLY_KINDS, SpanKind, kind_in
-from jaxcnc.program import Kind, Program
+from jaxcnc.program import MIN_MOVE_MM, Kind, Program
 
 __all__ = ["ArcTable", "PolyTable", "SpanKind", "Spans", "program_spans", "CURVED_KINDS", "POLY_KINDS"]
 
 #: Polynomial span degrees are bucketed to these values (few compiled kernels).
 DEGREE_BUCKETS = (2, 3, 5, 7)
-#: Motion rows shorter than this (mm) move nothing and produce no span.
-MIN_LENGTH_MM = 1e-9
+#: Motion rows shorter than this (mm) move nothing and produce no span (the program's own threshold).
+MIN_LENGTH_MM = MIN_MOVE_MM
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,9 +15,9 @@ What is compared with what, tick by tick:
   before ``k`` (ticks before the first event: the first event's row).
 * **Geometry compared.** A blended corner spans the end of one motion row and the start of the next, so
   the tick is compared with its own row ``r`` and with the nearest *moving* rows before and after it,
-  ``P`` and ``N`` (moving: a line of non-zero length, an arc or a spline; dwells, events and zero-length
-  moves are skipped). The distance is the smallest of the three distances. Rows that do not move (dwell,
-  event, zero-length line) are the point where they stand.
+  ``P`` and ``N`` (moving: a line longer than ``program.MIN_MOVE_MM``, an arc or a spline; dwells, events and
+  shorter moves, which the planner gives no span, are skipped). The distance is the smallest of the three
+  distances. Rows that do not move (dwell, event, a line not longer than that) are the point where they stand.
 * **Tolerance allowed.** The tolerance of the junction between consecutive moving rows ``a < b`` is the lower
   of the two rows' ``blend_tol`` (G64 P; the machine's ``corner_tol_mm`` where it is ``inf``, G64 without P),
   the second row's only where it has one: the mode a move is programmed in says how it ends, so 0 — an exact
@@ -59,7 +59,7 @@ import numpy as np
 from jaxcnc.errors import JaxcncError
 from jaxcnc.format import EventKind, TableFile
 from jaxcnc.machine import MachineConfig
-from jaxcnc.program import PROGRAM_AXES, Kind, Program, program_start
+from jaxcnc.program import MIN_MOVE_MM, PROGRAM_AXES, Kind, Program, program_start
 from jaxcnc.ticks.verify import TableRows, Violation, _runs, check_threads, map_chunks
 
 #: Numeric slack added to every tolerance (mm): far above the table's fixed point (2^-32 discrete) and
@@ -368,7 +368,7 @@ class ProgramPath:
         self.is_arc = kind == Kind.ARC
         self.is_curve = (kind == Kind.CURVE) & (pr.curve >= 0)
         line_len = np.linalg.norm(pr.end - pr.start, axis=1)
-        self.moving = self.is_arc | self.is_curve | ((kind == Kind.LINE) & (line_len > 0))
+        self.moving = self.is_arc | self.is_curve | ((kind == Kind.LINE) & (line_len > MIN_MOVE_MM))
         arc_rows = np.flatnonzero(self.is_arc)  # the arcs of the arc rows alone (row r is arc arc_of[r])
         self.arc_of = np.full(n, -1, np.int64)
         self.arc_of[arc_rows] = np.arange(arc_rows.size)
