@@ -255,6 +255,19 @@ def test_arc_turns_p_make_full_circles_then_the_arc():
     assert len(p) == 3 and p.end[-1][0] == 5 and p.plane[-1] == 19
 
 
+def test_g9_stops_at_the_end_of_its_block_alone():
+    """G9 (non-modal exact stop): the block's last row ends unblended and the next row starts at rest, as after a
+    move programmed under G61.1; an arc's P turns run on; without motion it does nothing (posts emit it; it was
+    refused until the red-team pass of 2026-12-08)."""
+    p = parse("G64 P0.1\nG1 X10 F600\nG9 G1 X10 Y10\nG1 X20 Y10\nG9 G2 X20 Y10 I1 P3\nG1 X30\nG9\nG1 X40 Y5\n")
+    assert list(p.line) == [2, 3, 4, 5, 5, 5, 6, 8]
+    assert list(p.blend_tol) == [0.1, 0.0, 0.1, 0.1, 0.1, 0.0, 0.1, 0.1]
+    assert list(p.stop_before) == [True, False, True, False, False, False, True, False]
+    same = parse("G64 P0.1\nG1 X10 F600\nG61.1\nG1 X10 Y10\nG64 P0.1\nG1 X20 Y10\n")
+    for k in ("blend_tol", "stop_before", "end"):
+        np.testing.assert_array_equal(getattr(same, k), getattr(p, k)[:3])
+
+
 @pytest.mark.parametrize(("block", "needle"), [("G2 X10 I5 P0", "positive integer"), ("G2 X10 I5 P1.5", "integer")])
 def test_arc_turns_must_be_positive_integers(block, needle):
     e = err(f"G1 X0 F60\n{block}\n")

@@ -7,7 +7,7 @@ turns every supported word into its proper meaning and refuses everything else w
 silently ignored.
 
 Supported here: G0 G1 G2 G3 (arcs in the G17/G18/G19 planes in IJK or R form, full circles, helices, P turns), G4,
-G5 G5.1 G5.2/G5.3 G6.2 splines, G8, G10 L2 (zero values), G17 G18 G19, G20 G21, G28, G40, G43 G43.1 G43.2 G49 (tool
+G5 G5.1 G5.2/G5.3 G6.2 splines, G8, G9, G10 L2 (zero values), G17 G18 G19, G20 G21, G28, G40, G43 G43.1 G43.2 G49 (tool
 offsets from the machine file's ``[tools]``), G53, G54–G59.3, G61 G61.1 G64 (P, Q), G80, G90 G91, G90.1 G91.1, G92
 G92.1 G92.2 G92.3, G94, G97, G98 G99, F, S, T, M0 M1 M2 M30, M3 M4 M5, M6, M7 M8 M9, N, block delete, comments,
 ``%`` delimiters, and through the preprocessor parameters, expressions and O-word control flow. Codes that name
@@ -67,6 +67,7 @@ _G_GROUP = {
     20: 1,
     30: 1,
     40: 0,
+    90: 0,  # G9 exact stop, this block only
     280: 0,
     170: 2,
     900: 3,
@@ -534,7 +535,13 @@ class _Interpreter:
             for k, w in axes.items():  # the current position now reads as the given value (under the tool offset)
                 s.g92[k] = s.pos[k] - w.value * s.scale - s.tool_offset[k]
         else:
+            rows = len(s.rows["kind"])
             self.move(b, axes, motion_word)
+            if b.has_g(90) is not None and len(s.rows["kind"]) > rows:
+                # G9: this block's motion ends at rest and its end is not blended — as a move programmed under
+                # G61.1, for this block alone (its last row: an arc's P turns run on into one another)
+                s.rows["blend_tol"][-1] = 0.0
+                s.pending_stop = True
         # stops and end
         for code, ev in (
             (0, Event.PROGRAM_STOP),
