@@ -45,5 +45,22 @@ class PlanningError(JaxcncError):
     """The program cannot be executed on this machine (outside travel, axis missing, ...)."""
 
 
+class RowPlanningError(PlanningError):
+    """A :class:`PlanningError` of one program row, raised where the program's file and lines are not known (a
+    planner sees spans): :func:`~jaxcnc.planners.plan_job` names the row's file and line.
+
+    Attributes:
+        row: the program row.
+        reason: what is wrong, without the location.
+        per_row: optional amounts per program row, of which the row's source line has the most (an arc's P turns
+            are rows of one line): ``plan_job`` names that line instead, and ``reason``'s ``{on_line}`` becomes
+            its amount.
+    """
+
+    def __init__(self, row: int, reason: str, per_row=None):
+        self.row, self.reason, self.per_row = int(row), reason, per_row
+        super().__init__(f"program row {self.row}: {reason}")
+
+
 class TableFileError(JaxcncError):
     """A tick table file that is damaged, truncated or not a table file at all."""

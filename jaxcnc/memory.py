@@ -105,4 +105,24 @@ def release_free_heap() -> None:
         trim(0)
 
 
-__all__ = ["PLANNING_ARENAS", "fix_thresholds", "limit_arenas", "release_free_heap", "tune_heap"]
+def available_memory_bytes() -> int | None:
+    """The memory the system could give this process now without swapping (Linux's ``MemAvailable``), or
+    ``None`` where it does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+__all__ = [
+    "PLANNING_ARENAS",
+    "available_memory_bytes",
+    "fix_thresholds",
+    "limit_arenas",
+    "release_free_heap",
+    "tune_heap",
+]

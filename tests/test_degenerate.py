@@ -156,6 +156,27 @@ def test_a_move_shorter_than_a_nanometre_at_a_blended_corner_stands(tmp_path, na
     assert np.count_nonzero(job.spans.kind == SpanKind.BLEND) >= 1  # the corner around it is blended
 
 
+def test_a_plan_larger_than_the_memory_available_is_refused_naming_the_line(monkeypatch):
+    """``topp`` refuses a grid that would not fit in the memory available, before planning, naming the source line
+    whose spans have the most intervals (P turns: rows of one line). A red-team pass (2026-12-08): 100 blocks of
+    ``G2 I0.001 P10000`` (360 M intervals) took 23 GB and were killed after 36 s without a word."""
+    from jaxcnc.errors import PlanningError
+    from jaxcnc.planners import plan_job, topp
+
+    m = parse_machine(machine_text(tick_hz=1000), "m")
+    text = "G1 X0 Y0 F600\nG2 I0.5 J0 P3\nG1 X2\nG2 I0.5 J0 P40\nG1 X3\n"
+    prog = parse_gcode(text, "turns.ngc")
+    plan_job(prog, m)  # fits
+    # 40 turns of 360 intervals on line 4: refused once the memory available is below the estimate
+    monkeypatch.setattr(topp, "available_memory_bytes", lambda: 10_000 * topp.PLAN_BYTES_PER_INTERVAL)
+    with pytest.raises(PlanningError) as info:
+        plan_job(prog, m)
+    msg = str(info.value)
+    assert msg.startswith("turns.ngc:4: planning needs ") and "14,400 of them on this block" in msg, msg
+    monkeypatch.setattr(topp, "available_memory_bytes", lambda: None)  # (where the system does not say)
+    plan_job(prog, m)
+
+
 def test_gcode_arc_turns_are_bounded():
     with pytest.raises(SourceError, match="turns"):
         parse_gcode("G2 X0 Y0 I1 F100 P1000000000\n", "t.ngc")

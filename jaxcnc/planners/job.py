@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxcnc.errors import PlanningError, SourceError
+from jaxcnc.errors import PlanningError, RowPlanningError, SourceError
 from jaxcnc.geometry.path import build_spans
 from jaxcnc.geometry.spans import SpanKind, Spans
 from jaxcnc.jaxconfig import planning_scope
@@ -174,6 +174,14 @@ def plan_job(program: Program, machine: MachineConfig, planner: str | Planner | 
                 plan = jerk_limited(request, chosen)  # jerk limits: the planner's time law averaged (an S-curve)
             else:
                 plan = chosen.plan(request)
+    except RowPlanningError as exc:  # a planner's refusal of one row: located in the program
+        line, reason = int(program.line[exc.row]), exc.reason
+        if exc.per_row is not None:  # the source line with the most (an arc's P turns are rows of one line)
+            lines = program.line[: len(exc.per_row)]
+            by_line = np.bincount(lines, weights=exc.per_row)
+            line = int(np.argmax(by_line))
+            reason = reason.replace("{on_line}", f"{int(by_line[line]):,}")
+        raise PlanningError(f"{program.file}:{line}: {reason}") from None
     except Exception as exc:
         one_line = PLANNERS.failed(name, exc)  # a plug-in's failure: one line naming it
         if one_line is None:
