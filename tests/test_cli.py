@@ -142,6 +142,8 @@ def test_help(cmd, capsys):
     [
         ("G1 X10 F600\nG1 X1.2.3\n", "prog.ngc:2:4: malformed number"),
         ("G1 X10 F600\nG1 X2000\n", "prog.ngc:2: X reaches 2000 mm, outside the travel"),
+        # past the edge by less than the 6 digits show: by how much (a red-team pass: "reaches 1000 mm" read oddly)
+        ("G1 X10 F600\nG1 X500.000002\n", "prog.ngc:2: X reaches 500.000002 mm (0.002 µm beyond), outside"),
         ("G1 X10 F600\nG1 Z5\n", "prog.ngc:2: the program moves axis Z"),
     ],
 )

@@ -93,12 +93,14 @@ def _check_travel(program: Program, spans: Spans, machine: MachineConfig) -> Non
     out = outside_travel(spans.lo, spans.hi, machine)
     if out is not None:
         k, axis, value, ax = out
+        text = f"{value:.6g} mm"
+        if text in (f"{ax.min:.6g} mm", f"{ax.max:.6g} mm"):  # (a blend's bulge past an edge: say by how much)
+            text = f"{value:.12g} mm ({(value - ax.max if value > ax.max else ax.min - value) * 1e3:.3g} µm beyond)"
         raise SourceError(
             program.file,
             int(program.line[spans.block[k]]),
             0,
-            f"{axis.upper()} reaches {value:.6g} mm, outside the travel of machine "
-            f"{machine.name!r} [{ax.min:g}, {ax.max:g}]",
+            f"{axis.upper()} reaches {text}, outside the travel of machine {machine.name!r} [{ax.min:g}, {ax.max:g}]",
         )
 
 
