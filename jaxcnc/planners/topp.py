@@ -568,8 +568,9 @@ def plan_topp(req: PlanRequest) -> Plan:
 
 
 #: What a grid interval costs to plan at the peak, bytes: measured 95 on three blocks of ``G2 I0.001 P10000`` (10.8 M
-#: intervals, 1.3 GB) and ~60 on the 1 M-block blended contour (5.2 M intervals); the segment table, the spans and
-#: the windows' arrays together.
+#: intervals, 1.3 GB above the runtime), where the intervals are all the work. An estimate for refusing the plans far
+#: beyond the memory, not a bound: where the spans weigh more (the 1 M-block blended contour, 5.2 M intervals) the
+#: peak is ~0.8 GB above the runtime.
 PLAN_BYTES_PER_INTERVAL = 100
 
 
