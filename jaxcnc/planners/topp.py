@@ -522,7 +522,7 @@ def plan_topp(req: PlanRequest) -> Plan:
     n = len(spans)
     counts = hold_counts(req, interval_counts(spans))
     capacity = int(counts.sum())
-    _check_plan_memory(spans, counts)
+    _check_plan_memory(spans, counts, capacity)
     large = bucket_size(capacity) >= TRIM_SEGMENTS  # where handing free memory back is worth its CPU
     if large:
         release_free_heap()  # what building the spans left (and a plan made before and freed)
@@ -574,18 +574,19 @@ def plan_topp(req: PlanRequest) -> Plan:
 PLAN_BYTES_PER_INTERVAL = 100
 
 
-def _check_plan_memory(spans: Spans, counts: np.ndarray) -> None:
+def _check_plan_memory(spans: Spans, counts: np.ndarray, capacity: int) -> None:
     """Refuse a plan whose grid would not fit in the memory available, before it is made (a red-team pass,
     2026-12-08: 202 lines of 1 µm circles with ``P10000`` turns each — 360 M intervals, 1° apiece — took the
-    machine's 23 GB and were killed after 36 s with nothing said), naming the block whose spans have the most."""
-    need = int(counts.sum()) * PLAN_BYTES_PER_INTERVAL
+    machine's 23 GB and were killed after 36 s with nothing said), naming the block whose spans have the most.
+    ``capacity``: the intervals, ``counts.sum()``."""
+    need = capacity * PLAN_BYTES_PER_INTERVAL
     available = available_memory_bytes()
     if available is None or need <= available:
         return
     by_row = np.bincount(spans.block, weights=counts)
     raise RowPlanningError(
         int(np.argmax(by_row)),
-        f"planning needs {int(counts.sum()):,} grid intervals (~{need / 2**30:.1f} GiB), more than the "
+        f"planning needs {capacity:,} grid intervals (~{need / 2**30:.1f} GiB), more than the "
         f"{available / 2**30:.1f} GiB of memory available; {{on_line}} of them on this block's path (arcs and "
         "curves are cut every 1°: many turns of a tiny arc add up)",
         per_row=by_row,

@@ -75,8 +75,9 @@ CURVE_MAX_SAMPLES = 1 << 20
 CHUNK_ROWS = 1 << 16
 #: Program axes (first, second, normal) of each arc plane, as RS274NGC defines them (G18 is Z-X).
 PLANE_AXES = {17: (0, 1, 2), 18: (2, 0, 1), 19: (1, 2, 0)}
-#: In-plane chord (mm) below which an arc's end equals its start: a full circle (as the G-code reader).
-FULL_CIRCLE_MM = 1e-9
+#: In-plane chord (mm) below which an arc's end equals its start: a full circle (the program's threshold of a move,
+#: as the planner's spans use it).
+FULL_CIRCLE_MM = MIN_MOVE_MM
 #: Junctions turning less than this are no corners for the "away from corners" figure (tangent joins).
 CORNER_MIN_TURN_RAD = 1e-6
 #: Samples per turn of a helix that start its Newton refinement (with the height match).
