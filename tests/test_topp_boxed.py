@@ -96,7 +96,7 @@ def test_grid_fields_are_views_of_the_padded_axis_major_storage():
         np.testing.assert_array_equal(getattr(grid, f), major[:, :m].T)
         assert not np.any(major[:, m:])  # zero padding, as the compiled programs expect
     boxes = boxes_at(device_spans(spans), grid.span[box], grid.s_start[box], grid.delta[box])
-    for f, want in zip(AXIS_FIELDS, boxes, strict=True):
+    for f, want in zip((*AXIS_FIELDS, "speed_hi"), boxes, strict=True):
         np.testing.assert_array_equal(getattr(grid, f)[box], want)
     line = np.flatnonzero(spans.kind[grid.span] == SpanKind.LINE)
     np.testing.assert_array_equal(grid.t_a[line], spans.tangent_in[grid.span[line]])

@@ -68,6 +68,9 @@ class Grid:
         boxed: ``(m,)`` bool, the interval has a box (blends): ``t_lo ≤ q' ≤ t_hi`` and
             ``k_lo ≤ q'' ≤ k_hi`` ``(m, 3)`` componentwise everywhere inside it (elsewhere copies of
             the start's values, unused).
+        speed_hi: ``(m,)`` where ``boxed``, a bound on ``|q'|`` everywhere inside the interval (the samples' largest
+            ``|q'|`` plus the norm of the ``q'`` box's pad): the feed's cap there (the norm of the box's corner
+            exceeds ``|q'|`` by about half the interval's turn; 0 elsewhere, unused).
         axis_major: the eight ``(m, 3)`` fields' storage, ``{name: (3, mb)}`` arrays aligned to
             ``ALIGN_BYTES`` and padded with zeros to ``mb ≥ m`` columns (each field is ``axis_major[name][:, :m].T``):
             the layout the planner's compiled programs read, in place.
@@ -86,6 +89,7 @@ class Grid:
     t_hi: np.ndarray
     k_lo: np.ndarray
     k_hi: np.ndarray
+    speed_hi: np.ndarray
     axis_major: dict[str, np.ndarray] | None = None
 
     def __len__(self) -> int:
@@ -200,12 +204,15 @@ BOX_CHUNK = 8192
 @cached_jit
 def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray) -> tuple[jnp.ndarray, ...]:
     """Ends and boxes of ``q'`` and ``q''`` on intervals ``[s0, s0 + delta]`` of polynomial spans (``(m,)``
-    each; returns eight ``(m, 3)`` arrays as :func:`boxes_at`).
+    each; returns eight ``(m, 3)`` arrays and the bound on ``|q'|`` ``(m,)`` as :func:`boxes_at`).
 
     ``BOX_SAMPLES`` points per interval, ends included, each an ``(m,)`` evaluation of its own: the samples'
     extremes are running minima and maxima of ``(m, 3)`` arrays, elementwise, with no ``(m, BOX_SAMPLES, 3)``
     array (whose reductions cost twice the arithmetic). Between samples ``h`` apart a function rises above the
-    chord between them (so above the higher sample) by at most ``h²/8 max|f''|``.
+    chord between them (so above the higher sample) by at most ``h²/8 max|f''|``. So ``q'`` lies within the pad
+    of the polyline through its samples, componentwise, and ``|q'| ≤ max_j |q'(s_j)| + |pad|`` (the norm is convex:
+    on a chord it stays below the higher end): a bound on the tool's speed per unit ``ṡ`` that does not grow with
+    the interval's turn as the norm of the box's corner does.
     """
     t, k, d3, d4 = [], [], [], []
     for frac in np.linspace(0.0, 1.0, BOX_SAMPLES):
@@ -217,21 +224,30 @@ def _boxes(arrays: dict, span: jnp.ndarray, s0: jnp.ndarray, delta: jnp.ndarray)
     h2 = (BOX_SAFETY * (delta / (BOX_SAMPLES - 1)) ** 2 / 8)[:, None]
     t_pad = reduce(jnp.maximum, d3) * h2
     k_pad = reduce(jnp.maximum, d4) * h2
+    speed_hi = reduce(jnp.maximum, [_norm3(d1_j) for d1_j in t]) + _norm3(t_pad)
     return (
         t[0], k[0], t[-1], k[-1],
         reduce(jnp.minimum, t) - t_pad, reduce(jnp.maximum, t) + t_pad,
         reduce(jnp.minimum, k) - k_pad, reduce(jnp.maximum, k) + k_pad,
+        speed_hi,
     )  # fmt: skip
 
 
+def _norm3(v: jnp.ndarray) -> jnp.ndarray:
+    """``(m,)`` norms of ``(m, 3)`` rows, written out elementwise: the same bits whatever ``m`` (a reduction over the
+    last axis is vectorised by shape, and its last bit changed between chunk sizes)."""
+    return jnp.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
+
+
 def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, ...]:
-    """:func:`_boxes` for NumPy queries ``(q,)``: ``(t_a, k_a, t_b, k_b, t_lo, t_hi, k_lo, k_hi)``, each ``(q, 3)``.
+    """:func:`_boxes` for NumPy queries ``(q,)``: ``(t_a, k_a, t_b, k_b, t_lo, t_hi, k_lo, k_hi)``, each ``(q, 3)``,
+    and ``speed_hi`` ``(q,)`` (:attr:`Grid.speed_hi`).
 
     On a CPU in calls of ``BOX_CHUNK`` rows, the last one padded, however few (all dispatched before any is read;
     one row count for every window of every program), else in one call padded to a bucket.
     """
     q = span.size
-    out = [np.empty((3, q)) for _ in range(8)]
+    out = [np.empty((3, q)) for _ in range(8)] + [np.empty(q)]
     _boxes_into(arrays, span, s0, delta, out, np.arange(q))
     return tuple(o.T for o in out)
 
@@ -239,8 +255,8 @@ def boxes_at(arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray) 
 def _boxes_into(
     arrays: dict, span: np.ndarray, s0: np.ndarray, delta: np.ndarray, out: list[np.ndarray], cols: np.ndarray
 ) -> None:
-    """:func:`boxes_at` written straight into columns ``cols`` ``(q,)`` of eight axis-major ``(3, n)`` arrays
-    ``out`` (no joined ``(q, 3)`` results to scatter afterwards)."""
+    """:func:`boxes_at` written straight into columns ``cols`` ``(q,)`` of eight axis-major ``(3, n)`` arrays and
+    an ``(n,)`` one, ``out`` (no joined ``(q, 3)`` results to scatter afterwards)."""
     q = span.size
     m = BOX_CHUNK if on_cpu() else bucket_size(q)
     n = max(-(-q // m), 1) * m
@@ -255,6 +271,9 @@ def _boxes_into(
         at = cols[i : i + k]
         for dest, res in zip(out, part, strict=True):
             res = np.asarray(res)
+            if dest.ndim == 1:
+                dest[at] = res[:k]
+                continue
             for axis in range(3):
                 dest[axis, at] = res[:k, axis]
 
@@ -325,14 +344,16 @@ def build_grid(
             major["t_b"][i, plain], major["k_b"][i, plain] = cols[i][at_b], cols[3 + i][at_b]
     for f, like in (("t_lo", "t_a"), ("t_hi", "t_a"), ("k_lo", "k_a"), ("k_hi", "k_a")):
         major[f][:, :m] = major[like][:, :m]  # copies of the start's values where there is no box
+    speed_hi = np.zeros(m)
     if box.size:
-        _boxes_into(arrays, local[box], s_start[box], delta[box], [major[f] for f in AXIS_FIELDS], box)
+        _boxes_into(arrays, local[box], s_start[box], delta[box], [major[f] for f in AXIS_FIELDS] + [speed_hi], box)
     return Grid(
         span=span,
         s_start=s_start,
         delta=delta,
         curved=curved,
         boxed=boxed,
+        speed_hi=speed_hi,
         axis_major=major,
         **{f: major[f][:, :m].T for f in AXIS_FIELDS},
     )
@@ -371,7 +392,7 @@ class GridPiece:
 
 
 #: The grid's ``(m,)`` fields.
-_ROW_FIELDS = ("span", "s_start", "delta", "curved", "boxed")
+_ROW_FIELDS = ("span", "s_start", "delta", "curved", "boxed", "speed_hi")
 
 
 def _grid_rows_copy(grid: Grid, start: int, stop: int) -> Grid:
