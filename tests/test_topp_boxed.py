@@ -53,7 +53,7 @@ def test_box_pieces_are_the_one_program_pieces(boxed_window):
     def one_program(g):
         c = topp._interval_rows(g, v_max, a_max, tol, hz, axes, j_max)
         laws = topp._law_inputs(c)
-        laws["share"] = topp.interval_share(g["at_kink"], g["curved"])
+        laws["share"] = topp.interval_share(g["at_kink"], topp._margined(g))
         return window_pieces(c["rows"], c["delta"], c["cap_a"], bands=False), laws
 
     pieces, laws = topp._box_pieces(g, v_max, a_max, tol, hz, axes, j_max)

@@ -49,7 +49,8 @@ BLEND_MIN_INTERVALS = 4
 BOX_SAMPLES = 5
 #: Safety factor on the sampled derivative maxima that widen a box.
 BOX_SAFETY = 1.25
-#: Fraction of the acceleration kept back on curved intervals for the change of q' and q'' inside one.
+#: Fraction of the acceleration and the axis speeds kept back on curved intervals without a box for the change of q'
+#: and q'' inside one (a box bounds that change: blends keep none back).
 GRID_MARGIN = 2e-3
 MAX_INTERVALS_PER_SPAN = 1 << 16
 

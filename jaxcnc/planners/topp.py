@@ -212,7 +212,7 @@ def _band_pieces(
     copy their square roots and arc sines into each consumer here; see :func:`_box_pieces`)."""
     c = _interval_rows(g, v_max, a_max, chord_tol, tick_hz, axes, j_max, caps)
     laws = _law_inputs(c)
-    laws["share"] = interval_share(g["at_kink"], g["curved"])
+    laws["share"] = interval_share(g["at_kink"], _margined(g))
     return window_pieces(c["rows"], c["delta"], c["cap_a"], bands=True), laws
 
 
@@ -254,7 +254,7 @@ def _box_part(g: dict, caps: dict | None, v_max, a_max, chord_tol, tick_hz, axes
     if part == "forward":
         return forward_pieces(gu, gx, h, c["delta"])
     laws = _law_inputs(c)
-    laws["share"] = interval_share(g["at_kink"], g["curved"])
+    laws["share"] = interval_share(g["at_kink"], _margined(g))
     return laws
 
 
@@ -313,8 +313,7 @@ def _interval_caps(g: dict, v_max, chord_tol, tick_hz, j_max) -> dict:
     ``cap_b`` with the junctions, holds and jerk caps too."""
     boxed = "boxed" in g  # windows without blends leave the box fields out (rows as without boxes: same values)
     col = {f: tuple(g[f][i] for i in range(3)) for f in (_AXIS_FIELDS if boxed else _AXIS_FIELDS[:4])}
-    curved = g["curved"]
-    vel_share = jnp.where(curved, 1.0 - GRID_MARGIN, 1.0)
+    vel_share = jnp.where(_margined(g), 1.0 - GRID_MARGIN, 1.0)
     vel = tuple(jnp.minimum(v_max[i], BIG) * vel_share for i in range(3))
     vcap_a = speed_cap(col["t_a"], col["k_a"], vel, g["feed"], chord_tol, tick_hz, g.get("chord_a"))
     vcap_b = speed_cap(col["t_b"], col["k_b"], vel, g["feed"], chord_tol, tick_hz, g.get("chord_b"))
@@ -345,7 +344,7 @@ def _interval_rows(
     col = {f: tuple(g[f][i] for i in range(3)) for f in (_AXIS_FIELDS if boxed else _AXIS_FIELDS[:4])}
     caps = _interval_caps(g, v_max, chord_tol, tick_hz, j_max) if caps is None else caps
     curved = g["curved"]
-    share = interval_share(g["at_kink"], curved)
+    share = interval_share(g["at_kink"], _margined(g))
     acc = [jnp.minimum(a_max[i], BIG) * share for i in axes]
     on = {f: [col[f][i] for i in axes] for f in col}  # the axes whose rows can bind
     box = (g["boxed"], on["t_lo"], on["t_hi"], on["k_lo"], on["k_hi"]) if boxed else None
@@ -381,6 +380,12 @@ def _segment_laws(laws: dict, x_node: jnp.ndarray) -> dict:
     x_cap = jnp.where(curved, jnp.maximum(x0, x1), laws["x_cap_line"])
     a_seg = jnp.where(curved, jnp.abs(x1 - x0) / two_d, laws["a_line"])
     return trapezoids(x_node, x_cap, a_seg, delta, laws["dwell"])
+
+
+def _margined(g: dict):
+    """``(m,)`` the intervals that keep ``GRID_MARGIN`` of the limits back: curved ones without a box (a box bounds
+    what ``q'`` and ``q''`` do inside its interval; elsewhere the ends' values stand for the interval)."""
+    return g["curved"] & ~g["boxed"] if "boxed" in g else g["curved"]
 
 
 def interval_share(at_kink, curved):
