@@ -284,8 +284,8 @@ def test_blend_trims_and_pieces_made_block_by_block_are_the_same_spans(monkeypat
 
     prog = _split_program()
     pieces = []
-    kernel = blend._kernel
-    monkeypatch.setattr(blend, "_kernel", lambda pts, corner: pieces.append(len(pts)) or kernel(pts, corner))
+    send = blend._send
+    monkeypatch.setattr(blend, "_send", lambda pts, corner: pieces.append(len(pts)) or send(pts, corner))
     whole = build_spans(prog, 0.5)
     assert len(pieces) > 3  # blends were split, in several rounds
     monkeypatch.setattr(blend, "TRIM_BLOCK", 5)

@@ -300,11 +300,15 @@ def _evaluate_families(a: dict, span: np.ndarray, s: np.ndarray, order: int) -> 
     span = np.broadcast_to(span, shape).reshape(-1)
     s = np.clip(np.broadcast_to(s, shape).reshape(-1), 0.0, a["length"][span])
     kind = a["kind"][span]
-    out = [np.empty((span.size, 3)) for _ in range(order + 1)]
+    # the lines' and points' derivatives from the second on are 0: zeroed pages, not values written
+    out = [np.empty((span.size, 3)) for _ in range(min(order, 1) + 1)]
+    out += [np.zeros((span.size, 3)) for _ in range(order - 1)]
     arc = kind == SpanKind.ARC
     poly = (kind == SpanKind.CURVE) | (kind == SpanKind.BLEND)
     rest = ~(arc | poly)  # lines, and points (``o``, derivatives 0)
-    rows = np.flatnonzero(rest) if not rest.all() else slice(None)
+    # where lines and points are most rows, their formulas run on every row and the other families' rows are written
+    # over below: no scatter into the rest's rows (a contour's blends: ~1/3 of the time)
+    rows = np.flatnonzero(rest) if 2 * np.count_nonzero(rest) < rest.size else slice(None)
     sp, line = span[rows], kind[rows] == SpanKind.LINE
     step = np.where(line, s[rows], 0.0)
     for i in range(3):
@@ -312,8 +316,6 @@ def _evaluate_families(a: dict, span: np.ndarray, s: np.ndarray, order: int) -> 
         out[0][rows, i] = o + step * t
         if order >= 1:
             out[1][rows, i] = np.where(line, t, 0.0)
-        for r in range(2, order + 1):
-            out[r][rows, i] = 0.0
     for family, mask in (("arc", arc), ("curve", poly)):
         rows = np.flatnonzero(mask)
         if rows.size:
