@@ -192,11 +192,12 @@ def _send(pts: np.ndarray, corner: np.ndarray) -> list[tuple[int, int, dict]]:
     return calls
 
 
-def _take(calls: list[tuple[int, int, dict]], out: dict[str, np.ndarray], at: int, size: int) -> dict[str, np.ndarray]:
+def _take(
+    calls: list[tuple[int, int, dict]], out: dict[str, np.ndarray], at: int, size: int, skip: tuple[str, ...] = ()
+) -> dict[str, np.ndarray]:
     """The outputs of :func:`_send`'s ``calls`` into rows ``at + lo:at + hi`` of ``out``'s arrays (arrays of ``size``
-    rows made for those it has not), call by call as each is done: no list of parts to join. ``t0`` and ``t1`` are
-    left out where ``out`` has them (:func:`_blend_round`'s own)."""
-    skip = {"t0", "t1"} & set(out)
+    rows made for those it has not), call by call as each is done: no list of parts to join. The outputs named in
+    ``skip`` are left out (:func:`_blend_round` puts the spans' own end tangents in ``t0`` and ``t1``)."""
     for lo, hi, part in calls:
         for k, v in part.items():
             if k in skip:
@@ -260,7 +261,7 @@ def _take_chunk(
     """:func:`_blend_round`'s chunk ``(lo, pts, calls)``: the kernel's outputs into ``out`` (arrays of ``size``
     rows), the control points of the rows kept appended to ``kept_pts``; returns those rows."""
     lo, pts, calls = chunk
-    _take(calls, out, lo, size)
+    _take(calls, out, lo, size, skip=("t0", "t1"))
     hi = lo + pts.shape[0]
     err, dev = out["err"][lo:hi], out["dev"][lo:hi]
     rows = np.flatnonzero(need[lo:hi] | ~(err <= poly.BLEND_SPEED_TOL) | ~np.isfinite(dev))
